@@ -1,0 +1,43 @@
+import os
+
+from setuptools import find_packages, setup
+
+with open(os.path.join("sb3_pola", "version.txt")) as file_handler:
+    __version__ = file_handler.read().strip()
+
+long_description = open("README.md").read() if os.path.exists("README.md") else ""
+
+setup(
+    name="sb3_pola",
+    version=__version__,
+    description="POLA (Policy Optimization by Looking Ahead): model-based offline RL for Stable-Baselines3",
+    long_description=long_description,
+    long_description_content_type="text/markdown",
+    packages=[package for package in find_packages() if package.startswith("sb3_pola")],
+    package_data={"sb3_pola": ["py.typed", "version.txt", "data/**/*"]},
+    include_package_data=True,
+    python_requires=">=3.10",
+    install_requires=[
+        "stable-baselines3>=2.9,<3.0",
+        # Install torch yourself first (CPU or CUDA build); the Makefile does it deliberately.
+        "torch>=2.3",
+        "gymnasium[mujoco]>=1.0",
+        "mujoco>=3.0",
+        "minari[hdf5]>=0.5.4,<0.6",
+        "numpy>=1.24",
+        "matplotlib",
+        "tqdm",
+        "rich",
+    ],
+    extras_require={
+        "zoo": ["rl_zoo3>=2.9", "requests", "tensorboard", "optuna"],
+        "tests": ["pytest", "pytest-xdist", "pytest-timeout"],
+        "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
+    },
+    entry_points={"console_scripts": ["sb3-pola=sb3_pola.cli:main"]},
+    license="MIT",
+    classifiers=[
+        "Programming Language :: Python :: 3",
+        "Topic :: Scientific/Engineering :: Artificial Intelligence",
+    ],
+)
