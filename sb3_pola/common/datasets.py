@@ -1,0 +1,577 @@
+"""Offline datasets: Minari datasets turned into flat float32 transition arrays.
+
+``load_offline_dataset`` accepts a Minari dataset id, a local dataset folder or a
+``minari.MinariDataset`` and returns an :class:`OfflineDataset`. Transitions are built from each
+episode's own observations (``next_obs[t] = obs[t + 1]`` of the same episode), ``dones`` are
+terminations only (a time-limit truncation is not terminal) and actions are rescaled to [-1, 1].
+
+Reading a Minari dataset costs ~2 ms per episode, so the concatenated arrays are cached on disk
+(one ``.npz`` per dataset, keyed by the dataset id, its size and a fingerprint of its files and
+metadata, so a changed dataset never gets stale arrays).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import hashlib
+import json
+import os
+import pathlib
+import tempfile
+import warnings
+import zipfile
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+# Bump when the cached arrays change meaning: old caches are then never read.
+CACHE_VERSION = 1
+METADATA_FILE = "metadata.json"
+_ARRAY_FIELDS = ("observations", "actions", "rewards", "next_observations", "dones", "episode_returns")
+# Rows per chunk when computing statistics, so no full-size float64 temporary is made.
+_STATS_CHUNK = 65536
+
+_warned_no_ref: set[str | None] = set()
+
+
+class DatasetError(ValueError):
+    """A dataset that cannot be used (unknown id, wrong spaces, bad values...)."""
+
+
+class DatasetNotFoundError(DatasetError, FileNotFoundError):
+    """No local dataset with the given id or path."""
+
+
+class SpaceMismatchError(DatasetError):
+    """The dataset's spaces do not match the environment's."""
+
+
+def package_datasets_dir() -> pathlib.Path:
+    """Folder of the datasets shipped with the package (``sb3_pola/data/datasets``)."""
+    return pathlib.Path(__file__).resolve().parent.parent / "data" / "datasets"
+
+
+def minari_datasets_dir() -> pathlib.Path:
+    """Minari's local datasets root, computed without creating it (minari's own helper does)."""
+    path = os.environ.get("MINARI_DATASETS_PATH")
+    return pathlib.Path(path) if path else pathlib.Path.home() / ".minari" / "datasets"
+
+
+def default_cache_dir() -> pathlib.Path:
+    """Cache root: ``$SB3_POLA_CACHE_DIR``, else ``$XDG_CACHE_HOME/sb3_pola``, else ``~/.cache/sb3_pola``."""
+    if os.environ.get("SB3_POLA_CACHE_DIR"):
+        return pathlib.Path(os.environ["SB3_POLA_CACHE_DIR"])
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (pathlib.Path(xdg) if xdg else pathlib.Path.home() / ".cache") / "sb3_pola"
+
+
+def normalized_score(returns: Any, ref_min: float | None, ref_max: float | None) -> float | None:
+    """D4RL normalised score ``100 * (R - ref_min) / (ref_max - ref_min)`` of the mean return.
+
+    :param returns: one return or several (their mean is scored)
+    :param ref_min: return of a random policy
+    :param ref_max: return of an expert policy
+    :return: the score, or None (with a one-time warning) when a reference score is missing
+    """
+    if ref_min is None or ref_max is None or ref_max == ref_min:
+        key = f"{ref_min}/{ref_max}"
+        if key not in _warned_no_ref:
+            _warned_no_ref.add(key)
+            warnings.warn(f"No usable reference scores (ref_min={ref_min}, ref_max={ref_max}): normalised score is None")
+        return None
+    mean_return = float(np.mean(np.asarray(returns, dtype=np.float64)))
+    return 100.0 * (mean_return - ref_min) / (ref_max - ref_min)
+
+
+@dataclass
+class OfflineDataset:
+    """Flat transitions of an offline dataset.
+
+    :param observations: ``[N, obs_dim]`` float32
+    :param actions: ``[N, act_dim]`` float32, rescaled to [-1, 1] from ``action_space`` bounds
+    :param rewards: ``[N]`` float32
+    :param next_observations: ``[N, obs_dim]`` float32, next observation of the same episode
+    :param dones: ``[N]`` float32, 1 on terminations only (truncations are not terminal)
+    :param observation_space: the dataset's observation space
+    :param action_space: the dataset's original (unscaled) action space
+    :param dataset_id: Minari id, if known
+    :param env_id: Gymnasium id of the environment, from the dataset's ``env_spec``
+    :param ref_min_score: random-policy return, for normalised scores
+    :param ref_max_score: expert-policy return, for normalised scores
+    :param episode_returns: ``[n_episodes]`` float64, undiscounted return of each episode
+    :param metadata: raw Minari metadata (``env_spec`` JSON etc.)
+    """
+
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    next_observations: np.ndarray
+    dones: np.ndarray
+    observation_space: gym.spaces.Box
+    action_space: gym.spaces.Box
+    dataset_id: str | None = None
+    env_id: str | None = None
+    ref_min_score: float | None = None
+    ref_max_score: float | None = None
+    episode_returns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float64))
+    metadata: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def __len__(self) -> int:
+        return int(self.observations.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the transition arrays."""
+        return sum(int(getattr(self, name).nbytes) for name in _ARRAY_FIELDS)
+
+    def obs_stats(self, eps: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and standard deviation of the observations (float64 accumulation, chunked).
+
+        :param eps: floor of the standard deviation (constant features would divide by zero)
+        :return: ``(mean, std)`` as float32 arrays of shape ``[obs_dim]``
+        """
+        obs = self.observations
+        n = max(len(obs), 1)
+        total = np.zeros(obs.shape[1:], dtype=np.float64)
+        for start in range(0, len(obs), _STATS_CHUNK):
+            total += obs[start : start + _STATS_CHUNK].sum(axis=0, dtype=np.float64)
+        mean = total / n
+        sq = np.zeros_like(mean)
+        for start in range(0, len(obs), _STATS_CHUNK):
+            diff = obs[start : start + _STATS_CHUNK].astype(np.float64) - mean
+            sq += (diff * diff).sum(axis=0)
+        std = np.maximum(np.sqrt(sq / n), eps)
+        return mean.astype(np.float32), std.astype(np.float32)
+
+    def normalized_score(self, returns: Any) -> float | None:
+        """Normalised score (D4RL, x100) of the mean of ``returns`` with this dataset's reference scores.
+
+        :param returns: episode return(s)
+        :return: the score, or None (warned once) when the dataset has no reference scores
+        """
+        if self.ref_min_score is None or self.ref_max_score is None:
+            if self.dataset_id not in _warned_no_ref:
+                _warned_no_ref.add(self.dataset_id)
+                warnings.warn(f"Dataset {self.dataset_id!r} has no ref_min_score/ref_max_score: normalised score is None")
+            return None
+        return normalized_score(returns, self.ref_min_score, self.ref_max_score)
+
+    def rescale_action(self, action: np.ndarray) -> np.ndarray:
+        """Map env actions to [-1, 1] (what the arrays hold)."""
+        low, high = self.action_space.low, self.action_space.high
+        return np.clip(2.0 * (action - low) / (high - low) - 1.0, -1.0, 1.0)
+
+    def unscale_action(self, scaled_action: np.ndarray) -> np.ndarray:
+        """Map [-1, 1] actions back to the env's bounds."""
+        low, high = self.action_space.low, self.action_space.high
+        return low + 0.5 * (np.asarray(scaled_action) + 1.0) * (high - low)
+
+
+# --------------------------------------------------------------------------- locating datasets
+
+
+def _data_dir(path: pathlib.Path) -> pathlib.Path | None:
+    """The Minari ``data`` folder for ``path`` (the dataset folder or ``data`` itself), or None."""
+    if (path / "data" / METADATA_FILE).is_file():
+        return path / "data"
+    if (path / METADATA_FILE).is_file():
+        return path
+    return None
+
+
+def _scan(root: pathlib.Path) -> dict[str, pathlib.Path]:
+    """Dataset ids -> data folders under a datasets root (ids are paths relative to the root)."""
+    found: dict[str, pathlib.Path] = {}
+    if not root.is_dir():
+        return found
+    for metadata_file in sorted(root.rglob(f"data/{METADATA_FILE}")):
+        data_dir = metadata_file.parent
+        found.setdefault(data_dir.parent.relative_to(root).as_posix(), data_dir)
+    return found
+
+
+def _search_roots() -> list[pathlib.Path]:
+    return [minari_datasets_dir(), package_datasets_dir()]
+
+
+def list_local_datasets() -> list[str]:
+    """Ids of the datasets in the Minari folder and those shipped with the package (sorted, unique)."""
+    ids: set[str] = set()
+    for root in _search_roots():
+        ids.update(_scan(root))
+    return sorted(ids)
+
+
+def _find_dataset_id(dataset_id: str) -> pathlib.Path | None:
+    for root in _search_roots():
+        data_dir = _data_dir(root / dataset_id)
+        if data_dir is not None:
+            return data_dir
+    return None
+
+
+def resolve_dataset_path(dataset: Any, download: bool = False) -> pathlib.Path:
+    """The ``data`` folder of a dataset given by id, path or ``MinariDataset``.
+
+    :param dataset: Minari id, local folder, or ``minari.MinariDataset``
+    :param download: download a missing id from the Minari server
+    :return: path of the folder that holds ``metadata.json``
+    """
+    storage = getattr(dataset, "storage", None)
+    if storage is not None and hasattr(storage, "data_path"):
+        return pathlib.Path(storage.data_path)
+    if isinstance(dataset, os.PathLike) or (isinstance(dataset, str) and os.path.isdir(dataset)):
+        path = pathlib.Path(dataset)
+        data_dir = _data_dir(path) if path.is_dir() else None
+        if data_dir is not None:
+            return data_dir
+        if isinstance(dataset, os.PathLike) or os.path.isabs(dataset):
+            raise DatasetNotFoundError(f"{path} is not a Minari dataset folder (no data/{METADATA_FILE} in it)")
+    if not isinstance(dataset, str):
+        raise TypeError(f"dataset must be a Minari id, a path or a MinariDataset, not {type(dataset).__name__}")
+    data_dir = _find_dataset_id(dataset)
+    if data_dir is None and download:
+        import minari
+
+        minari.download_dataset(dataset)
+        data_dir = _find_dataset_id(dataset)
+    if data_dir is None:
+        local = list_local_datasets()
+        raise DatasetNotFoundError(
+            f"Unknown dataset {dataset!r}: not in {minari_datasets_dir()} (MINARI_DATASETS_PATH) nor in the package's "
+            f"{package_datasets_dir()}. Local datasets: {', '.join(local) if local else 'none'}. "
+            f"Download it with `minari download {dataset}` or load_offline_dataset(..., download=True), "
+            "or make one with `sb3-pola collect`."
+        )
+    return data_dir
+
+
+def read_metadata(data_dir: pathlib.Path) -> dict[str, Any]:
+    with open(data_dir / METADATA_FILE) as file:
+        return json.load(file)
+
+
+def _env_id(metadata: dict[str, Any]) -> str | None:
+    spec = metadata.get("env_spec")
+    if not spec:
+        return None
+    try:
+        return json.loads(spec)["id"] if isinstance(spec, str) else spec.get("id")
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
+def _spaces(metadata: dict[str, Any], data_dir: pathlib.Path) -> tuple[gym.Space, gym.Space]:
+    from minari.dataset.minari_storage import MinariStorage
+    from minari.serialization import deserialize_space
+
+    if "observation_space" in metadata and "action_space" in metadata:
+        return deserialize_space(metadata["observation_space"]), deserialize_space(metadata["action_space"])
+    storage = MinariStorage.read(data_dir)  # recovers spaces from the env spec
+    return storage.observation_space, storage.action_space
+
+
+# --------------------------------------------------------------------------- cache
+
+
+def _fingerprint(data_dir: pathlib.Path, metadata: dict[str, Any]) -> str:
+    """Hash of everything a cache entry depends on: file sizes and mtimes (ns), and the metadata."""
+    digest = hashlib.sha256()
+    digest.update(f"v{CACHE_VERSION}".encode())
+    for path in sorted(p for p in data_dir.rglob("*") if p.is_file()):
+        stat = path.stat()
+        digest.update(f"{path.relative_to(data_dir).as_posix()}:{stat.st_size}:{stat.st_mtime_ns};".encode())
+    digest.update(json.dumps(metadata, sort_keys=True, default=str).encode())
+    return digest.hexdigest()
+
+
+def _cache_path(cache_dir: pathlib.Path, dataset_id: str | None, total_steps: int, fingerprint: str) -> pathlib.Path:
+    safe_id = "".join(c if c.isalnum() or c in "-_." else "_" for c in (dataset_id or "dataset"))
+    return cache_dir / f"{safe_id}-{total_steps}-{fingerprint[:24]}.npz"
+
+
+def _load_cache(path: pathlib.Path, n_steps: int, obs_dim: int, act_dim: int) -> dict[str, np.ndarray] | None:
+    """Arrays from a cache file, or None if missing or unusable (bad zip, CRC or shape mismatch)."""
+    if not path.is_file():
+        return None
+    expected = {
+        "observations": ((n_steps, obs_dim), np.float32),
+        "next_observations": ((n_steps, obs_dim), np.float32),
+        "actions": ((n_steps, act_dim), np.float32),
+        "rewards": ((n_steps,), np.float32),
+        "dones": ((n_steps,), np.float32),
+    }
+    try:
+        # Reading every member in full makes zipfile verify its CRC-32.
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in _ARRAY_FIELDS}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:
+        warnings.warn(f"Corrupt dataset cache {path} ({error!r}): rebuilding it")
+        return None
+    for name, (shape, dtype) in expected.items():
+        if arrays[name].shape != shape or arrays[name].dtype != dtype:
+            warnings.warn(f"Dataset cache {path} has {name} {arrays[name].shape} {arrays[name].dtype}: rebuilding it")
+            return None
+    return arrays
+
+
+def _save_cache(path: pathlib.Path, arrays: dict[str, np.ndarray]) -> None:
+    """Write the cache atomically (temp file in the same folder + os.replace); failures only warn."""
+    tmp_name = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
+        with os.fdopen(fd, "wb") as file:
+            np.savez(file, **arrays)
+        os.replace(tmp_name, path)
+        tmp_name = None
+    except OSError as error:
+        warnings.warn(f"Could not write dataset cache {path}: {error}")
+    finally:
+        if tmp_name is not None:
+            with contextlib.suppress(OSError):
+                os.remove(tmp_name)
+
+
+# --------------------------------------------------------------------------- reading episodes
+
+
+def _check_spaces(observation_space: gym.Space, action_space: gym.Space, where: str) -> None:
+    if not isinstance(action_space, gym.spaces.Box):
+        raise DatasetError(
+            f"{where} has action space {action_space}: POLA needs continuous (Box) actions, "
+            "discrete action spaces are not supported"
+        )
+    if not isinstance(observation_space, gym.spaces.Box) or len(observation_space.shape) != 1:
+        raise DatasetError(f"{where} has observation space {observation_space}: a flat Box is needed")
+    if len(action_space.shape) != 1:
+        raise DatasetError(f"{where} has action space {action_space}: a flat Box is needed")
+    if not (np.all(np.isfinite(action_space.low)) and np.all(np.isfinite(action_space.high))):
+        raise DatasetError(f"{where} has unbounded actions {action_space}: they cannot be rescaled to [-1, 1]")
+
+
+def _build_arrays(
+    episodes: Iterable[dict[str, Any]],
+    n_steps: int,
+    n_episodes: int,
+    obs_dim: int,
+    act_dim: int,
+    action_space: gym.spaces.Box,
+    where: str,
+    progress: bool,
+) -> dict[str, np.ndarray]:
+    """Concatenate episodes into preallocated arrays (no list of per-episode copies)."""
+    obs = np.empty((n_steps, obs_dim), dtype=np.float32)
+    next_obs = np.empty((n_steps, obs_dim), dtype=np.float32)
+    actions = np.empty((n_steps, act_dim), dtype=np.float32)
+    rewards = np.empty(n_steps, dtype=np.float32)
+    dones = np.empty(n_steps, dtype=np.float32)
+    returns = np.empty(n_episodes, dtype=np.float64)
+    low = action_space.low.astype(np.float64)
+    span = action_space.high.astype(np.float64) - low
+    bad = {"observations": 0, "actions": 0, "rewards": 0}
+    pos = 0
+    n_seen = 0
+    if progress:
+        with contextlib.suppress(ImportError):
+            from tqdm.auto import tqdm
+
+            episodes = tqdm(episodes, total=n_episodes, desc=f"reading {where}", unit="ep", leave=False)
+    for episode in episodes:
+        ep_obs = np.asarray(episode["observations"]).reshape(-1, obs_dim)
+        ep_act = np.asarray(episode["actions"], dtype=np.float64).reshape(-1, act_dim)
+        ep_rew = np.asarray(episode["rewards"], dtype=np.float64).reshape(-1)
+        length = len(ep_rew)
+        if len(ep_obs) != length + 1 or len(ep_act) != length:
+            raise DatasetError(
+                f"{where}: episode {n_seen} has {len(ep_obs)} observations, {len(ep_act)} actions and "
+                f"{length} rewards (expected T+1, T, T)"
+            )
+        if pos + length > n_steps or n_seen >= n_episodes:
+            raise DatasetError(f"{where}: more data than its metadata says ({n_steps} steps, {n_episodes} episodes)")
+        bad["observations"] += int(ep_obs.size - np.count_nonzero(np.isfinite(ep_obs)))
+        bad["actions"] += int(ep_act.size - np.count_nonzero(np.isfinite(ep_act)))
+        bad["rewards"] += int(ep_rew.size - np.count_nonzero(np.isfinite(ep_rew)))
+        end = pos + length
+        obs[pos:end] = ep_obs[:-1]
+        next_obs[pos:end] = ep_obs[1:]
+        actions[pos:end] = np.clip(2.0 * (ep_act - low) / span - 1.0, -1.0, 1.0)
+        rewards[pos:end] = ep_rew
+        dones[pos:end] = np.asarray(episode["terminations"], dtype=bool).reshape(-1)
+        returns[n_seen] = ep_rew.sum()
+        pos = end
+        n_seen += 1
+    if pos != n_steps or n_seen != n_episodes:
+        raise DatasetError(
+            f"{where}: read {pos} steps in {n_seen} episodes, its metadata says {n_steps} steps in {n_episodes} episodes"
+        )
+    bad_fields = {name: count for name, count in bad.items() if count}
+    if bad_fields:
+        details = ", ".join(f"{name}: {count} values" for name, count in bad_fields.items())
+        raise DatasetError(f"{where} has non-finite (NaN or inf) entries: {details}")
+    return {
+        "observations": obs,
+        "actions": actions,
+        "rewards": rewards,
+        "next_observations": next_obs,
+        "dones": dones,
+        "episode_returns": returns,
+    }
+
+
+def _same_spaces(dataset_space: gym.spaces.Box, env_space: gym.Space, bounds: bool) -> bool:
+    if not isinstance(env_space, gym.spaces.Box) or env_space.shape != dataset_space.shape:
+        return False
+    if not bounds:
+        return True
+    return bool(np.allclose(env_space.low, dataset_space.low) and np.allclose(env_space.high, dataset_space.high))
+
+
+def load_offline_dataset(
+    dataset: str | os.PathLike | Any,
+    *,
+    env: gym.Env | None = None,
+    download: bool = False,
+    use_cache: bool = True,
+    cache_dir: str | os.PathLike | None = None,
+    progress: bool = False,
+) -> OfflineDataset:
+    """Load a Minari dataset as flat float32 transitions.
+
+    :param dataset: a Minari id (looked up in ``$MINARI_DATASETS_PATH`` or ``~/.minari/datasets``,
+        then among the package's shipped datasets), a local dataset folder (containing ``data/``, or
+        ``data/`` itself) or a ``minari.MinariDataset``
+    :param env: if given, the dataset's spaces must match its spaces
+    :param download: download a missing id with ``minari.download_dataset``
+    :param use_cache: read/write the on-disk cache of the concatenated arrays
+    :param cache_dir: cache folder (default ``$SB3_POLA_CACHE_DIR`` or ``~/.cache/sb3_pola``)
+    :param progress: show a progress bar while reading episodes
+    :return: the dataset
+    """
+    data_dir = resolve_dataset_path(dataset, download=download)
+    metadata = read_metadata(data_dir)
+    dataset_id = metadata.get("dataset_id") or (dataset if isinstance(dataset, str) else None)
+    where = f"dataset {dataset_id!r} ({data_dir})"
+    observation_space, action_space = _spaces(metadata, data_dir)
+    _check_spaces(observation_space, action_space, where)
+    assert isinstance(observation_space, gym.spaces.Box) and isinstance(action_space, gym.spaces.Box)
+    if env is not None:
+        obs_ok = _same_spaces(observation_space, env.observation_space, bounds=False)
+        act_ok = _same_spaces(action_space, env.action_space, bounds=True)
+        if not (obs_ok and act_ok):
+            raise SpaceMismatchError(
+                f"{where} does not match the env: dataset observation space {observation_space} vs env "
+                f"{env.observation_space}; dataset action space {action_space} vs env {env.action_space}"
+            )
+    n_steps = int(metadata.get("total_steps", 0))
+    n_episodes = int(metadata.get("total_episodes", 0))
+    if n_steps <= 0 or n_episodes <= 0:
+        raise DatasetError(f"{where} is empty ({n_steps} steps, {n_episodes} episodes)")
+    obs_dim, act_dim = int(observation_space.shape[0]), int(action_space.shape[0])
+
+    arrays = None
+    cache_file = None
+    if use_cache:
+        root = pathlib.Path(cache_dir) if cache_dir is not None else default_cache_dir()
+        cache_file = _cache_path(root, dataset_id, n_steps, _fingerprint(data_dir, metadata))
+        arrays = _load_cache(cache_file, n_steps, obs_dim, act_dim)
+        if arrays is not None and len(arrays["episode_returns"]) != n_episodes:
+            arrays = None
+    if arrays is None:
+        from minari.dataset.minari_storage import MinariStorage
+
+        storage = MinariStorage.read(data_dir)
+        episodes = storage.get_episodes(range(n_episodes))
+        arrays = _build_arrays(episodes, n_steps, n_episodes, obs_dim, act_dim, action_space, where, progress)
+        if cache_file is not None:
+            _save_cache(cache_file, arrays)
+
+    ref_min, ref_max = metadata.get("ref_min_score"), metadata.get("ref_max_score")
+    return OfflineDataset(
+        observations=arrays["observations"],
+        actions=arrays["actions"],
+        rewards=arrays["rewards"],
+        next_observations=arrays["next_observations"],
+        dones=arrays["dones"],
+        observation_space=observation_space,
+        action_space=action_space,
+        dataset_id=dataset_id,
+        env_id=_env_id(metadata),
+        ref_min_score=None if ref_min is None else float(ref_min),
+        ref_max_score=None if ref_max is None else float(ref_max),
+        episode_returns=arrays["episode_returns"],
+        metadata=metadata,
+    )
+
+
+def make_env(dataset: OfflineDataset | str | os.PathLike, **env_kwargs: Any) -> gym.Env:
+    """The environment a dataset was recorded in, from its Minari ``env_spec`` (with its time limit).
+
+    :param dataset: a loaded dataset, or a Minari id / dataset folder
+    :param env_kwargs: extra arguments for ``gym.make`` (e.g. ``render_mode``)
+    :return: a new environment
+    """
+    if isinstance(dataset, OfflineDataset):
+        metadata = dataset.metadata
+        if not metadata.get("env_spec") and dataset.env_id is not None:
+            return gym.make(dataset.env_id, **env_kwargs)
+    else:
+        metadata = read_metadata(resolve_dataset_path(dataset))
+    spec_str = metadata.get("env_spec")
+    if not spec_str:
+        raise DatasetError(f"Dataset {metadata.get('dataset_id')!r} records no environment (env_spec)")
+    from gymnasium.envs.registration import EnvSpec
+
+    # Keys older gymnasium versions wrote that EnvSpec no longer takes (as minari does).
+    spec_str = (
+        spec_str.replace('"order_enforce": true,', "")
+        .replace('"apply_api_compatibility": false,', "")
+        .replace('"autoreset": false, ', "")
+    )
+    return gym.make(EnvSpec.from_json(spec_str), **env_kwargs)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``sb3-pola datasets``: list local datasets (id, steps, episodes, env, reference scores)."""
+    parser = argparse.ArgumentParser(prog="sb3-pola datasets", description="List the Minari datasets found locally.")
+    parser.parse_args(argv)
+    rows = []
+    seen = set()
+    for root in _search_roots():
+        for dataset_id, data_dir in _scan(root).items():
+            if dataset_id in seen:
+                continue  # the Minari folder shadows the shipped copy, as in load_offline_dataset
+            seen.add(dataset_id)
+            try:
+                meta = read_metadata(data_dir)
+            except (OSError, ValueError) as error:
+                rows.append((dataset_id, "?", "?", f"unreadable: {error}", "", "", str(root)))
+                continue
+            rows.append(
+                (
+                    dataset_id,
+                    str(meta.get("total_steps", "?")),
+                    str(meta.get("total_episodes", "?")),
+                    _env_id(meta) or "?",
+                    str(meta.get("ref_min_score", "-")),
+                    str(meta.get("ref_max_score", "-")),
+                    str(root),
+                )
+            )
+    print(f"datasets in {minari_datasets_dir()} (MINARI_DATASETS_PATH) and {package_datasets_dir()} (shipped)")
+    if not rows:
+        print("none found: make one with `sb3-pola collect` or `minari download <id>`")
+        return 0
+    header = ("id", "steps", "episodes", "env", "ref_min", "ref_max", "root")
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+    for row in [header, *rows]:
+        print("  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
