@@ -1,0 +1,348 @@
+"""POLA: Policy Optimization by Looking Ahead (Liu & Hofert), in the Stable-Baselines3 mould."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import polyak_update
+from torch.nn.utils import clip_grad_norm_
+
+from sb3_pola.common.buffers import OfflineReplayBuffer
+from sb3_pola.common.offline_algorithm import OfflineAlgorithm
+from sb3_pola.common.termination import TerminationFn, get_termination_fn
+from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy
+
+SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
+
+
+class POLA(OfflineAlgorithm):
+    """Policy Optimization by Looking Ahead: model-based offline RL with a diffusion policy.
+
+    Paper: Y. Liu and M. Hofert, "Policy Optimization by Looking Ahead for Model-based Offline
+    Reinforcement Learning". Each gradient step (``train``) does, on a batch from the dataset:
+
+    1. critic: TD regression of every member of the ``n_critics`` ensemble on the pessimistic
+       target ``r + gamma (1 - done) min_j Q'_j(s', a')``, ``a'`` from the EMA actor (section IV);
+    2. actor: ``L_d + eta * L_q`` where ``L_d`` is the DDPM loss on dataset actions (eq. 6) and
+       ``L_q`` the look-ahead loss (eq. 3, 4): the mean of the ``top_k`` smallest ensemble
+       Q-values at the current state and at ``rollout_length`` states predicted by the dynamics
+       model, weighted by ``gamma^i``; the actor sees ``s_new``, the state with all pairwise
+       products (section V);
+    3. EMA actor and Polyak target critics.
+
+    The dynamics model (an ensemble of Gaussian MLPs, MOPO-style) is fitted on the dataset with
+    holdout early stopping when ``learn`` first starts, then frozen. ``rollout_length=0`` is
+    Diffusion-QL with an ensemble critic; ``eta=0`` is behaviour cloning with the diffusion actor.
+
+    Choices the paper leaves open, taken from Diffusion-QL (the code POLA builds on): the Q term
+    is divided by the detached mean ``|Q|`` of the current-state term (scale invariance); the
+    critic loss sums the members' MSEs; targets use the EMA actor's action; gradients of both
+    losses are clipped to ``max_grad_norm``. Look-ahead states that a termination rule (the known
+    MuJoCo rule for the env, or the model's learned termination head when the env is unknown)
+    marks terminal contribute no Q term, and neither do any states after them.
+
+    :param policy: policy class or alias (``"MlpPolicy"``)
+    :param env: env (or id) for evaluation callbacks; made from the dataset's metadata if ``None``
+    :param dataset: Minari dataset id, path to a Minari dataset folder, or ``minari.MinariDataset``
+    :param learning_rate: learning rate of actor and critic (Adam), a float or a schedule
+    :param batch_size: minibatch size
+    :param tau: Polyak coefficient of the target critics
+    :param gamma: discount factor, also the weight ``gamma^i`` of the ``i``-th look-ahead term (eq. 3)
+    :param n_critics: size ``N`` of the critic ensemble (paper: 10)
+    :param top_k: number ``K`` of smallest ensemble Q-values averaged in the policy loss (eq. 4)
+    :param rollout_length: look-ahead horizon ``T`` (paper ablates 0, 1, 3, 5; 0 disables the model)
+    :param eta: weight of the Q term in the actor loss (``0`` = behaviour cloning)
+    :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
+        dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False``:
+        look-ahead states are detached, so each Q term only trains the action taken at its state.
+    :param n_diffusion_steps: denoising steps of the diffusion actor
+    :param beta_schedule: noise schedule: ``"vp"`` (default), ``"linear"`` or ``"cosine"``
+    :param use_state_products: give the actor the pairwise state products (section V)
+    :param max_grad_norm: gradient-norm clipping of actor and critic (``None`` disables it)
+    :param ema_decay: decay of the EMA actor used for targets and ``predict``
+    :param ema_update_freq: gradient steps between EMA updates
+    :param ema_start: gradient step from which the EMA averages (before it copies the actor)
+    :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`
+    :param dynamics_fit_kwargs: arguments of :meth:`~sb3_pola.common.dynamics.EnsembleDynamics.fit`
+    :param download: let Minari download a dataset id that is not found locally
+    :param policy_kwargs: extra arguments of :class:`~sb3_pola.pola.policies.POLAPolicy`
+        (``net_arch``, ``activation_fn``, ``n_action_samples``, ``critic_state_products``, ...)
+    :param tensorboard_log: tensorboard log folder
+    :param verbose: 0 silent, 1 info, 2 debug
+    :param seed: random seed
+    :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
+    :param _init_setup_model: build the networks at construction
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}
+    policy: POLAPolicy
+    actor: DiffusionActor
+    critic: EnsembleCritic
+    critic_target: EnsembleCritic
+
+    def __init__(
+        self,
+        policy: str | type[POLAPolicy],
+        env: GymEnv | str | None = None,
+        dataset: Any = None,
+        learning_rate: float | Schedule = 3e-4,
+        batch_size: int = 256,
+        tau: float = 0.005,
+        gamma: float = 0.99,
+        n_critics: int = 10,
+        top_k: int = 2,
+        rollout_length: int = 3,
+        eta: float = 1.0,
+        backprop_through_model: bool = True,
+        n_diffusion_steps: int = 5,
+        beta_schedule: str = "vp",
+        use_state_products: bool = True,
+        max_grad_norm: float | None = 1.0,
+        ema_decay: float = 0.995,
+        ema_update_freq: int = 5,
+        ema_start: int = 1000,
+        dynamics_kwargs: dict[str, Any] | None = None,
+        dynamics_fit_kwargs: dict[str, Any] | None = None,
+        download: bool = False,
+        policy_kwargs: dict[str, Any] | None = None,
+        tensorboard_log: str | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: str = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        super().__init__(
+            policy,
+            env,
+            dataset,
+            learning_rate,
+            batch_size=batch_size,
+            tau=tau,
+            gamma=gamma,
+            download=download,
+            policy_kwargs=policy_kwargs,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+        )
+        if not 1 <= top_k <= n_critics:
+            raise ValueError(f"top_k must be in [1, n_critics={n_critics}], got {top_k}")
+        if rollout_length < 0:
+            raise ValueError(f"rollout_length must be >= 0, got {rollout_length}")
+        self.n_critics = n_critics
+        self.top_k = top_k
+        self.rollout_length = rollout_length
+        self.eta = eta
+        self.backprop_through_model = backprop_through_model
+        self.n_diffusion_steps = n_diffusion_steps
+        self.beta_schedule = beta_schedule
+        self.use_state_products = use_state_products
+        self.max_grad_norm = max_grad_norm
+        self.ema_decay = ema_decay
+        self.ema_update_freq = ema_update_freq
+        self.ema_start = ema_start
+        self.dynamics_kwargs = dynamics_kwargs or {}
+        self.dynamics_fit_kwargs = dynamics_fit_kwargs or {}
+        self.dynamics_fit_info: dict[str, float] = {}
+        if _init_setup_model:
+            self._setup_model()
+
+    def _setup_model(self) -> None:
+        self._setup_lr_schedule()
+        self.set_random_seed(self.seed)
+        self._termination_fn: TerminationFn | None = get_termination_fn(self.env_id)
+        dynamics_kwargs = None
+        if self.rollout_length > 0:
+            # a learned termination head stands in for the env's rule where none is known
+            dynamics_kwargs = {"learn_termination": self._termination_fn is None, **self.dynamics_kwargs}
+        self.policy = self.policy_class(
+            self.observation_space,
+            self.action_space,
+            self.lr_schedule,
+            n_critics=self.n_critics,
+            n_diffusion_steps=self.n_diffusion_steps,
+            beta_schedule=self.beta_schedule,
+            use_state_products=self.use_state_products,
+            dynamics_kwargs=dynamics_kwargs,
+            **self.policy_kwargs,
+        )
+        self.policy = self.policy.to(self.device)
+        if self._offline_data is not None:
+            mean, std = self._offline_data.obs_stats()
+            self.policy.set_normalization(mean, std)
+        self._create_aliases()
+        self._gamma_powers = th.tensor([self.gamma**i for i in range(self.rollout_length + 1)], device=self.device)
+        self._stat_sums: dict[str, th.Tensor] = {}
+        self._stat_count = 0
+
+    def _create_aliases(self) -> None:
+        self.actor = self.policy.actor
+        self.critic = self.policy.critic
+        self.critic_target = self.policy.critic_target
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "actor", "critic", "critic_target", "_termination_fn", "_stat_sums", "_gamma_powers"]
+
+    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
+        return ["policy", "actor.optimizer", "critic.optimizer"], []
+
+    # ------------------------------------------------------------------ dynamics model
+    def _before_training(self, progress_bar: bool = False) -> None:
+        dynamics = self.policy.dynamics
+        if dynamics is None or bool(self.policy.dynamics_fitted):
+            return
+        buffer = self._setup_offline_data()
+        fit_kwargs = {"progress_bar": progress_bar, "logger": self.logger, "verbose": self.verbose, **self.dynamics_fit_kwargs}
+        self.dynamics_fit_info = dynamics.fit(
+            buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones, **fit_kwargs
+        )
+        dynamics.freeze()
+        self.policy.dynamics_fitted.fill_(True)
+        if self.verbose >= 1:
+            print(f"Dynamics model fitted: {self.dynamics_fit_info}")
+
+    # ------------------------------------------------------------------ one gradient step
+    def train(self, gradient_steps: int, batch_size: int = 256) -> None:
+        self.policy.set_training_mode(True)
+        self._update_learning_rate([self.actor.optimizer, self.critic.optimizer])
+        buffer = self._setup_offline_data()
+        for _ in range(gradient_steps):
+            stats = self._update(buffer.sample(batch_size))
+            self._n_updates += 1
+            for key, value in stats.items():
+                self._stat_sums[key] = self._stat_sums[key] + value if key in self._stat_sums else value
+            self._stat_count += 1
+
+    def _update(self, batch: Any) -> dict[str, th.Tensor]:
+        """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics."""
+        obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
+        rewards, dones = batch.rewards.flatten(), batch.dones.flatten()
+        policy = self.policy
+
+        # critic: pessimistic TD target, min over the target ensemble (section IV)
+        with th.no_grad():
+            next_actions = policy.actor_ema.sample(policy.actor_features(next_obs))
+            next_q = self.critic_target(next_obs, next_actions).min(dim=0).values  # [B]
+            target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
+        current_q = self.critic(obs, actions)  # [N, B]
+        critic_loss = (current_q - target_q).pow(2).mean(dim=1).sum()
+        self.critic.optimizer.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        critic_grad_norm = self._clip(self.critic.parameters())
+        self.critic.optimizer.step()
+
+        # actor: L_d + eta * L_q (eq. 6 and eq. 3/4)
+        features = policy.actor_features(obs)
+        bc_loss = self.actor.loss(actions, features)
+        stats = {}
+        if self.eta != 0:
+            q_loss, stats = self._lookahead_q_loss(obs, features)
+            actor_loss = bc_loss + self.eta * q_loss
+        else:
+            q_loss = th.zeros((), device=obs.device)
+            actor_loss = bc_loss
+        self.actor.optimizer.zero_grad(set_to_none=True)
+        actor_loss.backward()
+        actor_grad_norm = self._clip(self.actor.parameters())
+        self.actor.optimizer.step()
+
+        # EMA actor (Diffusion-QL: copies the actor until ema_start, then averages every ema_update_freq steps)
+        step = self._n_updates + 1
+        if step % self.ema_update_freq == 0:
+            decay = self.ema_decay if step >= self.ema_start else 0.0
+            polyak_update(self.actor.parameters(), policy.actor_ema.parameters(), 1.0 - decay)
+        polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
+
+        stats.update(
+            critic_loss=critic_loss.detach(),
+            actor_loss=actor_loss.detach(),
+            bc_loss=bc_loss.detach(),
+            q_loss=q_loss.detach(),
+            q_mean=current_q.detach().mean(),
+            q_ensemble_std=current_q.detach().std(dim=0).mean(),
+            target_q=target_q.mean(),
+            critic_grad_norm=critic_grad_norm,
+            actor_grad_norm=actor_grad_norm,
+        )
+        return stats
+
+    def _lookahead_q_loss(self, obs: th.Tensor, features: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """``L_q`` of eq. 4: top-K pessimistic Q at ``s_t`` and at ``T`` model-predicted states, weighted by ``gamma^i``."""
+        policy, horizon = self.policy, self.rollout_length
+        batch_size = obs.shape[0]
+        action = self.actor.sample(features)  # a_t = pi(s_t), differentiable through the reverse chain
+        states, actions_, alive = [obs], [action], [th.ones(batch_size, device=obs.device)]
+        state = obs
+        for _ in range(horizon):
+            assert policy.dynamics is not None
+            next_state, _, terminal_prob = policy.dynamics.step(state, action)
+            if self._termination_fn is not None:
+                terminal = self._termination_fn(state, action, next_state).float()
+            else:
+                terminal = terminal_prob.detach()
+            alive.append(alive[-1] * (1.0 - terminal))
+            state = next_state if self.backprop_through_model else next_state.detach()
+            action = self.actor.sample(policy.actor_features(state))  # a_{t+i} = pi(s_{t+i})
+            states.append(state)
+            actions_.append(action)
+
+        # all T + 1 critic evaluations in one ensemble call; critic weights get no gradient here
+        self.critic.requires_grad_(False)
+        q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
+        self.critic.requires_grad_(True)
+        q_top_k = q.topk(self.top_k, dim=0, largest=False).values.mean(dim=0).view(horizon + 1, batch_size)  # [T+1, B]
+        alive_mask = th.stack(alive)  # [T+1, B]
+        per_step = (alive_mask * q_top_k).mean(dim=1)  # [T+1]
+        # scale-free Q term (Diffusion-QL): divide by the detached mean |Q| at the current states
+        q_scale = q_top_k[0].abs().mean().detach().clamp_min(1e-6)
+        q_loss = -(self._gamma_powers * per_step).sum() / q_scale
+        stats = {f"lookahead_q_{i}": per_step[i].detach() for i in range(horizon + 1)}
+        stats["lookahead_alive"] = alive_mask[-1].mean()
+        return q_loss, stats
+
+    def _clip(self, parameters: Any) -> th.Tensor:
+        if self.max_grad_norm is None:
+            return th.zeros(())
+        return clip_grad_norm_(parameters, self.max_grad_norm)
+
+    def _record_train_stats(self) -> None:
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        if self._stat_count == 0:
+            return
+        values = th.stack(list(self._stat_sums.values())).cpu().numpy() / self._stat_count  # one host sync per dump
+        for key, value in zip(self._stat_sums, values):
+            self.logger.record(f"train/{key}", float(value))
+        self._stat_sums, self._stat_count = {}, 0
+
+    # ------------------------------------------------------------------ scores
+    def normalized_score(self, returns: float | np.ndarray) -> float | None:
+        """D4RL score ``100 (R - ref_min) / (ref_max - ref_min)`` of the mean return, from the dataset's metadata."""
+        if self.ref_min_score is None or self.ref_max_score is None:
+            return None
+        return float(100.0 * (np.mean(returns) - self.ref_min_score) / (self.ref_max_score - self.ref_min_score))
+
+    def learn(
+        self: SelfPOLA,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1000,
+        tb_log_name: str = "POLA",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfPOLA:
+        return super().learn(
+            total_timesteps=total_timesteps,
+            callback=callback,
+            log_interval=log_interval,
+            tb_log_name=tb_log_name,
+            reset_num_timesteps=reset_num_timesteps,
+            progress_bar=progress_bar,
+        )
+
+
+__all__ = ["POLA", "OfflineReplayBuffer"]

@@ -1,0 +1,310 @@
+"""Networks of POLA: the diffusion actor (paper section V), the critic ensemble (section IV) and the policy that holds them."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from torch import nn
+from torch.nn import functional as F
+
+from sb3_pola.common.diffusion import NoiseSchedule
+from sb3_pola.common.torch_layers import SinusoidalPosEmb, StateProductsExtractor, vectorized_mlp
+
+
+class DiffusionActor(nn.Module):
+    """Conditional DDPM over actions in ``[-1, 1]``: the noise predictor ``eps_theta(a_t, s_new, t)`` of eq. 5 / 6.
+
+    The MLP sees ``[a_t, time_embedding(t), state_features]`` (Diffusion-QL's layout). Sampling
+    splits its first layer by input block so the state's projection is computed once per
+    sample instead of once per denoising step (same numbers as the concatenated layer).
+
+    :param features_dim: size of the state features (``s_new`` with the products)
+    :param action_dim: action size
+    :param net_arch: hidden layer sizes of the noise predictor
+    :param n_diffusion_steps: number of denoising steps
+    :param beta_schedule: ``"vp"``, ``"linear"`` or ``"cosine"``
+    :param time_embedding_dim: size of the sinusoidal time embedding
+    :param activation_fn: activation (Mish in Diffusion-QL)
+    """
+
+    def __init__(
+        self,
+        features_dim: int,
+        action_dim: int,
+        net_arch: list[int],
+        n_diffusion_steps: int = 5,
+        beta_schedule: str = "vp",
+        time_embedding_dim: int = 16,
+        activation_fn: type[nn.Module] = nn.Mish,
+    ) -> None:
+        super().__init__()
+        self.features_dim = features_dim
+        self.action_dim = action_dim
+        self.time_embedding_dim = time_embedding_dim
+        self.schedule = NoiseSchedule(n_diffusion_steps, beta_schedule)
+        self.time_mlp = nn.Sequential(
+            SinusoidalPosEmb(time_embedding_dim),
+            nn.Linear(time_embedding_dim, 2 * time_embedding_dim),
+            activation_fn(),
+            nn.Linear(2 * time_embedding_dim, time_embedding_dim),
+        )
+        self.input_layer = nn.Linear(action_dim + time_embedding_dim + features_dim, net_arch[0])
+        layers: list[nn.Module] = [activation_fn()]
+        for in_size, out_size in zip(net_arch[:-1], net_arch[1:]):
+            layers += [nn.Linear(in_size, out_size), activation_fn()]
+        layers.append(nn.Linear(net_arch[-1], action_dim))
+        self.trunk = nn.Sequential(*layers)
+        self.register_buffer("step_indices", th.arange(n_diffusion_steps), persistent=False)
+
+    @property
+    def n_diffusion_steps(self) -> int:
+        return self.schedule.n_steps
+
+    def predict_noise(self, x_t: th.Tensor, t: th.Tensor, features: th.Tensor) -> th.Tensor:
+        """``eps_theta(x_t, s_new, t)`` for a batch with per-sample steps ``t`` [B]."""
+        # [B, A + time + F] -> [B, A]
+        return self.trunk(self.input_layer(th.cat((x_t, self.time_mlp(t), features), dim=-1)))
+
+    def loss(self, actions: th.Tensor, features: th.Tensor) -> th.Tensor:
+        """Behaviour-cloning loss ``L_d`` (eq. 6): noise-prediction MSE at a uniformly drawn step."""
+        t = th.randint(0, self.n_diffusion_steps, (actions.shape[0],), device=actions.device)
+        noise = th.randn_like(actions)
+        x_t = self.schedule.add_noise(actions, noise, t)
+        return F.mse_loss(self.predict_noise(x_t, t, features), noise)
+
+    def sample(self, features: th.Tensor, generator: th.Generator | None = None) -> th.Tensor:
+        """Draw actions with the reverse chain (eq. 5), differentiable w.r.t. the parameters and ``features``.
+
+        :param features: ``[B, F]`` state features
+        :param generator: draws the chain's noise from this generator (a fixed seed gives a deterministic action)
+        :return: ``[B, A]`` actions in ``[-1, 1]``
+        """
+        batch_size = features.shape[0]
+        a_dim, t_dim = self.action_dim, self.time_embedding_dim
+        weight = self.input_layer.weight  # [H, A + time + F]
+        # constant over the chain: state and time projections, computed once
+        state_proj = F.linear(features, weight[:, a_dim + t_dim :], self.input_layer.bias)  # [B, H]
+        time_proj = F.linear(self.time_mlp(self.step_indices), weight[:, a_dim : a_dim + t_dim])  # [n, H]
+        w_action = weight[:, :a_dim]  # [H, A]
+        noise = th.randn(
+            (self.n_diffusion_steps + 1, batch_size, a_dim), device=features.device, dtype=features.dtype, generator=generator
+        )
+        x = noise[-1]  # a_T ~ N(0, I)
+        for t in reversed(range(self.n_diffusion_steps)):
+            eps = self.trunk(F.linear(x, w_action) + time_proj[t] + state_proj)
+            x = self.schedule.step(eps, t, x, noise[t])
+        return x.clamp(-1.0, 1.0)
+
+
+class EnsembleCritic(nn.Module):
+    """``N`` Q-networks as one vectorised module: ``[N, B, in]`` through batched matmuls (paper section IV).
+
+    :param features_extractor: state normalisation (and optional products) shared by all members
+    :param action_dim: action size
+    :param net_arch: hidden layer sizes of every member
+    :param n_critics: ensemble size ``N``
+    :param activation_fn: activation
+    """
+
+    def __init__(
+        self,
+        features_extractor: StateProductsExtractor,
+        action_dim: int,
+        net_arch: list[int],
+        n_critics: int = 10,
+        activation_fn: type[nn.Module] = nn.Mish,
+    ) -> None:
+        super().__init__()
+        self.features_extractor = features_extractor
+        self.n_critics = n_critics
+        self.q_net = vectorized_mlp(features_extractor.features_dim + action_dim, 1, net_arch, n_critics, activation_fn)
+
+    def forward(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """Q-values of every member: ``[B, obs], [B, A] -> [N, B]``."""
+        x = th.cat((self.features_extractor(obs), actions), dim=-1)  # [B, in]
+        x = x.unsqueeze(0).expand(self.n_critics, -1, -1)  # [N, B, in], no copy
+        return self.q_net(x).squeeze(-1)
+
+
+class POLAPolicy(BasePolicy):
+    """Policy of POLA: diffusion actor on ``s_new`` (state + pairwise products), its EMA copy, and the critic ensemble with targets.
+
+    ``predict`` uses the EMA actor (as Diffusion-QL evaluates). With ``n_action_samples > 1``
+    it draws that many candidate actions per state and keeps the one with the highest
+    pessimistic (min over the ensemble) Q-value (``deterministic=True``), or samples one with
+    probabilities ``softmax(Q)`` as Diffusion-QL does. ``deterministic=True`` draws the chain's
+    noise from a generator with a fixed seed, so the same observation always gives the same action.
+
+    :param observation_space: a flat ``Box``
+    :param action_space: a ``Box``
+    :param lr_schedule: learning-rate schedule (actor and critic)
+    :param net_arch: hidden sizes, a list for both or ``dict(pi=[...], qf=[...])`` (default 3 x 256 each)
+    :param activation_fn: activation of actor and critics (Mish, as Diffusion-QL)
+    :param n_critics: critic ensemble size ``N`` (paper: 10)
+    :param n_diffusion_steps: denoising steps of the actor (paper and Diffusion-QL: 5)
+    :param beta_schedule: noise schedule, ``"vp"``, ``"linear"`` or ``"cosine"``
+    :param use_state_products: feed the actor ``s_new`` = state + all ``X_i X_j, i < j`` (paper section V)
+    :param critic_state_products: also give the critics the products (the paper reports this hurts)
+    :param time_embedding_dim: size of the diffusion-step embedding
+    :param n_action_samples: candidate actions per state in ``predict``
+    :param predict_seed: seed of the noise used by deterministic ``predict``
+    :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`; ``None`` builds no model
+    :param optimizer_class: optimizer of actor and critic
+    :param optimizer_kwargs: extra optimizer arguments
+    """
+
+    actor: DiffusionActor
+    actor_ema: DiffusionActor
+    critic: EnsembleCritic
+    critic_target: EnsembleCritic
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        lr_schedule: Schedule,
+        net_arch: list[int] | dict[str, list[int]] | None = None,
+        activation_fn: type[nn.Module] = nn.Mish,
+        n_critics: int = 10,
+        n_diffusion_steps: int = 5,
+        beta_schedule: str = "vp",
+        use_state_products: bool = True,
+        critic_state_products: bool = False,
+        time_embedding_dim: int = 16,
+        n_action_samples: int = 1,
+        predict_seed: int = 0,
+        dynamics_kwargs: dict[str, Any] | None = None,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        if not isinstance(observation_space, spaces.Box) or len(observation_space.shape) != 1:
+            raise ValueError(f"POLA needs a flat Box observation space, got {observation_space}")
+        if not isinstance(action_space, spaces.Box):
+            raise ValueError(f"POLA needs a continuous (Box) action space, got {action_space}")
+        super().__init__(
+            observation_space,
+            action_space,
+            features_extractor_class=StateProductsExtractor,
+            features_extractor_kwargs={"use_state_products": use_state_products},
+            optimizer_class=optimizer_class,
+            optimizer_kwargs=optimizer_kwargs,
+            normalize_images=False,
+            squash_output=True,  # actions live in [-1, 1]; predict() rescales them to the env's bounds
+        )
+        if net_arch is None:
+            net_arch = [256, 256, 256]
+        if isinstance(net_arch, dict):
+            actor_arch, critic_arch = net_arch["pi"], net_arch["qf"]
+        else:
+            actor_arch, critic_arch = net_arch, net_arch
+        if n_action_samples < 1:
+            raise ValueError(f"n_action_samples must be >= 1, got {n_action_samples}")
+        self.net_arch = net_arch
+        self.activation_fn = activation_fn
+        self.n_critics = n_critics
+        self.n_diffusion_steps = n_diffusion_steps
+        self.beta_schedule = beta_schedule
+        self.use_state_products = use_state_products
+        self.critic_state_products = critic_state_products
+        self.time_embedding_dim = time_embedding_dim
+        self.n_action_samples = n_action_samples
+        self.predict_seed = predict_seed
+        self.dynamics_kwargs = dynamics_kwargs
+        action_dim = int(np.prod(action_space.shape))
+        obs_dim = int(np.prod(observation_space.shape))
+
+        self.features_extractor = self.make_features_extractor()  # actor's s_new
+        self.actor = DiffusionActor(
+            self.features_extractor.features_dim,
+            action_dim,
+            actor_arch,
+            n_diffusion_steps=n_diffusion_steps,
+            beta_schedule=beta_schedule,
+            time_embedding_dim=time_embedding_dim,
+            activation_fn=activation_fn,
+        )
+        self.actor_ema = copy.deepcopy(self.actor).requires_grad_(False)
+        critic_features = StateProductsExtractor(observation_space, use_state_products=critic_state_products)
+        self.critic = EnsembleCritic(critic_features, action_dim, critic_arch, n_critics, activation_fn)
+        self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        self.critic_target.train(False)
+        self.actor_ema.train(False)
+
+        self.dynamics: nn.Module | None = None
+        if dynamics_kwargs is not None:
+            from sb3_pola.common.dynamics import EnsembleDynamics
+
+            self.dynamics = EnsembleDynamics(obs_dim, action_dim, **dynamics_kwargs)
+        # whether the dynamics model has been fitted; a buffer so it travels with the weights
+        self.register_buffer("dynamics_fitted", th.zeros((), dtype=th.bool))
+
+        self.actor.optimizer = self.optimizer_class(self.actor.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+        self.critic.optimizer = self.optimizer_class(self.critic.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(
+            net_arch=self.net_arch,
+            activation_fn=self.activation_fn,
+            n_critics=self.n_critics,
+            n_diffusion_steps=self.n_diffusion_steps,
+            beta_schedule=self.beta_schedule,
+            use_state_products=self.use_state_products,
+            critic_state_products=self.critic_state_products,
+            time_embedding_dim=self.time_embedding_dim,
+            n_action_samples=self.n_action_samples,
+            predict_seed=self.predict_seed,
+            dynamics_kwargs=self.dynamics_kwargs,
+            lr_schedule=self._dummy_schedule,
+            optimizer_class=self.optimizer_class,
+            optimizer_kwargs=self.optimizer_kwargs,
+        )
+        return data
+
+    def set_normalization(self, mean: np.ndarray | th.Tensor, std: np.ndarray | th.Tensor) -> None:
+        """Set the state normalisation (dataset mean and std) of the actor and critic inputs."""
+        assert isinstance(self.features_extractor, StateProductsExtractor)
+        for extractor in (self.features_extractor, self.critic.features_extractor, self.critic_target.features_extractor):
+            extractor.set_normalization(th.as_tensor(mean), th.as_tensor(std))
+
+    def actor_features(self, obs: th.Tensor) -> th.Tensor:
+        """``s_new``: normalised state with the pairwise products (section V)."""
+        return self.features_extractor(obs)
+
+    def forward(self, obs: th.Tensor, deterministic: bool = False) -> th.Tensor:
+        return self._predict(obs, deterministic=deterministic)
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        assert isinstance(observation, th.Tensor)
+        obs = observation.float()
+        generator = None
+        if deterministic:
+            generator = th.Generator(device=obs.device)
+            generator.manual_seed(self.predict_seed)
+        n = self.n_action_samples
+        if n == 1:
+            return self.actor_ema.sample(self.actor_features(obs), generator=generator)
+        batch_size = obs.shape[0]
+        obs_rep = obs.repeat_interleave(n, dim=0)  # [B * n, obs]
+        actions = self.actor_ema.sample(self.actor_features(obs_rep), generator=generator)  # [B * n, A]
+        q = self.critic_target(obs_rep, actions).min(dim=0).values.view(batch_size, n)  # [B, n]
+        if deterministic:
+            idx = q.argmax(dim=1)
+        else:
+            idx = th.multinomial(F.softmax(q, dim=1), 1).squeeze(1)
+        return actions.view(batch_size, n, -1)[th.arange(batch_size, device=obs.device), idx]
+
+    def set_training_mode(self, mode: bool) -> None:
+        # targets and the EMA copy stay in eval mode; they have no dropout/batch-norm, so this is for clarity only
+        self.actor.train(mode)
+        self.critic.train(mode)
+        self.training = mode
+
+
+MlpPolicy = POLAPolicy
