@@ -1,0 +1,526 @@
+"""Record D4RL-style Minari datasets for a continuous-action Gymnasium env (``sb3-pola collect``).
+
+Kinds (as in D4RL):
+
+- ``random``: uniform random actions;
+- ``medium``: a "medium" policy acting stochastically (``--policy``, or SAC stopped early);
+- ``expert``: an expert policy acting stochastically (``--expert-policy``, or the best SAC checkpoint);
+- ``medium-replay``: SAC's replay buffer up to the medium checkpoint;
+- ``medium-expert``: the medium and expert datasets concatenated.
+
+Several kinds can be made from one SAC run (``--kind medium medium-replay``). The datasets get
+``ref_min_score`` (random policy) and ``ref_max_score`` (expert policy, deterministic), each the
+mean return over ``--ref-episodes`` (>= 10) episodes. Written with
+``minari.create_dataset_from_buffers`` (``DataCollector`` needs jax) under ``--out`` or
+``$MINARI_DATASETS_PATH`` as ``<envname>/<kind>-v<version>``.
+
+Example::
+
+    sb3-pola collect --env InvertedPendulum-v5 --kind medium medium-replay --steps 30000 \\
+        --medium-return 250 --medium-max-return 600 --expert-return 1000 --seed 0 --out sb3_pola/data/datasets
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import copy
+import dataclasses
+import json
+import os
+import pathlib
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+KINDS = ("random", "medium", "expert", "medium-replay", "medium-expert")
+MIN_REF_EPISODES = 10
+
+PolicyFn = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass
+class Checkpoint:
+    """A SAC snapshot taken at an evaluation."""
+
+    step: int
+    mean_return: float
+    policy_state: dict[str, Any]
+    replay_pos: int
+
+
+def _progress(total: int, desc: str, enabled: bool) -> Any:
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, disable=not enabled, leave=False, file=sys.stderr)
+
+
+@contextlib.contextmanager
+def _env_var(name: str, value: str) -> Iterator[None]:
+    old = os.environ.get(name)
+    os.environ[name] = value
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = old
+
+
+def default_name(env_id: str) -> str:
+    """``InvertedPendulum-v5`` -> ``invertedpendulum``."""
+    return env_id.split("/")[-1].rsplit("-v", 1)[0].lower()
+
+
+def rollout(
+    env: gym.Env, policy: PolicyFn | None, n_steps: int, seed: int, progress: bool = False, desc: str = "rollout"
+) -> list[Any]:
+    """Record exactly ``n_steps`` transitions as Minari episode buffers.
+
+    Episodes end on termination or on the env's time limit (truncation); the last one, cut by the
+    step budget, is marked truncated.
+
+    :param env: environment (with its TimeLimit)
+    :param policy: observation -> action in env units; None for uniform random actions
+    :param n_steps: transitions to record
+    :param seed: seed of the first reset and of the action space
+    :return: list of ``minari.data_collector.EpisodeBuffer``
+    """
+    from minari.data_collector import EpisodeBuffer
+
+    env.action_space.seed(seed)
+    episodes = []
+    obs, _ = env.reset(seed=seed)
+    ep_obs, ep_act, ep_rew, ep_term, ep_trunc = [obs], [], [], [], []
+    with _progress(n_steps, desc, progress) as bar:
+        for step in range(n_steps):
+            action = env.action_space.sample() if policy is None else policy(obs)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            last = step == n_steps - 1
+            ep_obs.append(obs)
+            ep_act.append(np.asarray(action, dtype=np.float32))
+            ep_rew.append(float(reward))
+            ep_term.append(bool(terminated))
+            ep_trunc.append(bool(truncated) or (last and not terminated))
+            bar.update(1)
+            if terminated or truncated or last:
+                episodes.append(
+                    EpisodeBuffer(
+                        id=len(episodes),
+                        observations=np.asarray(ep_obs),
+                        actions=np.asarray(ep_act),
+                        rewards=np.asarray(ep_rew),
+                        terminations=np.asarray(ep_term),
+                        truncations=np.asarray(ep_trunc),
+                    )
+                )
+                if not last:
+                    obs, _ = env.reset()
+                    ep_obs, ep_act, ep_rew, ep_term, ep_trunc = [obs], [], [], [], []
+    return episodes
+
+
+def evaluate(env: gym.Env, policy: PolicyFn | None, n_episodes: int, seed: int) -> list[float]:
+    """Undiscounted returns of ``n_episodes`` full episodes."""
+    env.action_space.seed(seed)
+    returns = []
+    for episode in range(n_episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        done, total = False, 0.0
+        while not done:
+            action = env.action_space.sample() if policy is None else policy(obs)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += float(reward)
+            done = terminated or truncated
+        returns.append(total)
+    return returns
+
+
+def policy_fn(model: Any, deterministic: bool) -> PolicyFn:
+    """Observation -> env-unit action of an SB3 model (``predict`` unscales and clips)."""
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        return model.predict(obs, deterministic=deterministic)[0]
+
+    return act
+
+
+def load_policy(path: str, algo: str, env: gym.Env) -> Any:
+    """Load an SB3 model zip (``algo`` names its class)."""
+    import stable_baselines3 as sb3
+
+    algos: dict[str, Any] = {name: getattr(sb3, name.upper()) for name in ("sac", "td3", "ddpg", "ppo", "a2c")}
+    with contextlib.suppress(ImportError):
+        import sb3_contrib
+
+        algos.update(tqc=sb3_contrib.TQC, trpo=sb3_contrib.TRPO)
+    if algo not in algos:
+        raise ValueError(f"Unknown --policy-algo {algo!r}; choose from {sorted(algos)}")
+    return algos[algo].load(path, env=env, device="cpu")
+
+
+def train_sac(
+    env_id: str,
+    train_steps: int,
+    seed: int,
+    eval_freq: int,
+    eval_episodes: int,
+    expert_return: float | None,
+    progress: bool,
+    sac_kwargs: dict[str, Any] | None = None,
+) -> tuple[Any, list[Checkpoint]]:
+    """Train SAC, snapshotting the policy (and replay-buffer position) at every evaluation.
+
+    :param expert_return: stop once a deterministic evaluation reaches this return
+    :return: the model (its replay buffer holds all transitions) and the checkpoints
+    """
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    eval_env = gym.make(env_id)
+    checkpoints: list[Checkpoint] = []
+
+    class EvalSnapshots(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.bar: Any = None
+
+        def _on_training_start(self) -> None:
+            self.bar = _progress(train_steps, f"SAC {env_id}", progress)
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+        def _on_step(self) -> bool:
+            self.bar.update(1)
+            if self.num_timesteps % eval_freq != 0:
+                return True
+            returns = evaluate(eval_env, policy_fn(self.model, True), eval_episodes, seed=10_000 + self.num_timesteps)
+            mean = float(np.mean(returns))
+            assert self.model.replay_buffer is not None
+            checkpoints.append(
+                Checkpoint(
+                    self.num_timesteps,
+                    mean,
+                    copy.deepcopy(self.model.policy.state_dict()),
+                    int(self.model.replay_buffer.pos),
+                )
+            )
+            self.bar.set_postfix(eval_return=f"{mean:.1f}")
+            return expert_return is None or mean < expert_return
+
+    env = gym.make(env_id)
+    kwargs = {"buffer_size": max(train_steps, 1), **(sac_kwargs or {})}
+    model = SAC("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **kwargs)
+    model.learn(total_timesteps=train_steps, callback=EvalSnapshots())
+    return model, checkpoints
+
+
+def pick_medium(checkpoints: list[Checkpoint], low: float | None, high: float | None) -> Checkpoint:
+    """First checkpoint whose eval return lies in ``[low, high]``, else the closest one.
+
+    Without ``low``, the target is a third of the best return (D4RL's "medium" level).
+    """
+    best = max(c.mean_return for c in checkpoints)
+    low = best / 3.0 if low is None else low
+    high = np.inf if high is None else high
+    for checkpoint in checkpoints:
+        if low <= checkpoint.mean_return <= high:
+            return checkpoint
+    target = low if np.isinf(high) else 0.5 * (low + high)
+    closest = min(checkpoints, key=lambda c: abs(c.mean_return - target))
+    print(
+        f"warning: no checkpoint with eval return in [{low}, {high}]; using step {closest.step} "
+        f"(return {closest.mean_return:.1f})",
+        file=sys.stderr,
+    )
+    return closest
+
+
+def replay_episodes(model: Any, end: int) -> list[Any]:
+    """Episodes of the SAC replay buffer's first ``end`` transitions (actions in env units)."""
+    from minari.data_collector import EpisodeBuffer
+
+    buffer = model.replay_buffer
+    obs = buffer.observations[:end, 0]
+    next_obs = buffer.next_observations[:end, 0]
+    # SAC stores actions scaled to [-1, 1]; the dataset records what the env received.
+    actions = model.policy.unscale_action(buffer.actions[:end, 0]).astype(np.float32)
+    rewards = buffer.rewards[:end, 0]
+    timeouts = buffer.timeouts[:end, 0].astype(bool)
+    dones = buffer.dones[:end, 0].astype(bool)
+    ends = np.flatnonzero(dones)
+    if len(ends) == 0 or ends[-1] != end - 1:
+        ends = np.append(ends, end - 1)
+    episodes = []
+    start = 0
+    for stop in ends + 1:
+        terminations = dones[start:stop] & ~timeouts[start:stop]
+        truncations = timeouts[start:stop].copy()
+        if not terminations[-1]:
+            truncations[-1] = True  # the budget cut the last episode
+        episodes.append(
+            EpisodeBuffer(
+                id=len(episodes),
+                observations=np.concatenate([obs[start:stop], next_obs[stop - 1 : stop]]),
+                actions=actions[start:stop],
+                rewards=rewards[start:stop],
+                terminations=terminations,
+                truncations=truncations,
+            )
+        )
+        start = stop
+    return episodes
+
+
+def _repack(data_dir: pathlib.Path) -> None:
+    """Rewrite minari's HDF5 file with contiguous datasets.
+
+    Minari writes every episode's arrays as resizable chunked datasets, ~14 kB of overhead per
+    episode; contiguous ones need ~2 kB, which keeps short-episode datasets (random,
+    medium-replay) several times smaller. The layout is the same, so minari reads it as before.
+    """
+    import h5py
+
+    src = data_dir / "main_data.hdf5"
+    tmp = data_dir / "main_data.hdf5.tmp"
+
+    def copy_group(group_in: Any, group_out: Any) -> None:
+        group_out.attrs.update(group_in.attrs)
+        for key, value in group_in.items():
+            if isinstance(value, h5py.Group):
+                copy_group(value, group_out.create_group(key, track_order=True))
+            else:
+                group_out.create_dataset(key, data=value[()])
+
+    with h5py.File(src, "r") as file_in, h5py.File(tmp, "w", track_order=True) as file_out:
+        copy_group(file_in, file_out)
+    os.replace(tmp, src)
+    metadata_file = data_dir / "metadata.json"
+    metadata = json.loads(metadata_file.read_text())
+    metadata["dataset_size"] = round(src.stat().st_size / 1e6, 1)  # MB, as minari computes it
+    metadata_file.write_text(json.dumps(metadata))
+
+
+def write_dataset(
+    out_root: pathlib.Path,
+    dataset_id: str,
+    episodes: list[Any],
+    env_id: str,
+    ref_min: float,
+    ref_max: float,
+    ref_episodes: int,
+    algorithm_name: str,
+    description: str,
+    overwrite: bool,
+) -> pathlib.Path:
+    """Create the Minari dataset in a temporary root, then move it in place (no half-written dataset)."""
+    import minari
+
+    target = out_root / dataset_id
+    if target.exists():
+        if not overwrite:
+            raise FileExistsError(f"{target} exists: pass --overwrite to replace it")
+        shutil.rmtree(target)
+    out_root.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out_root, prefix=".collect-") as tmp, _env_var("MINARI_DATASETS_PATH", tmp):
+        minari.create_dataset_from_buffers(
+            dataset_id=dataset_id,
+            buffer=episodes,
+            env=env_id,
+            eval_env=env_id,
+            algorithm_name=algorithm_name,
+            author="sb3-pola collect",
+            author_email="none@example.org",
+            code_permalink="sb3_pola/collect.py",
+            ref_min_score=ref_min,
+            ref_max_score=ref_max,
+            num_episodes_average_score=ref_episodes,
+            description=description,
+            data_format="hdf5",
+        )
+        _repack(pathlib.Path(tmp) / dataset_id / "data")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(pathlib.Path(tmp) / dataset_id, target)
+        if "/" in dataset_id:  # minari's namespace file, which `minari list local` expects
+            namespace = dataset_id.split("/")[0]
+            ns_file = pathlib.Path(tmp) / namespace / "namespace_metadata.json"
+            if ns_file.exists() and not (out_root / namespace / ns_file.name).exists():
+                shutil.copy(ns_file, out_root / namespace / ns_file.name)
+    return target
+
+
+def make_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="sb3-pola collect", description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--env", required=True, help="Gymnasium env id with continuous actions, e.g. InvertedPendulum-v5")
+    parser.add_argument("--kind", nargs="+", choices=KINDS, default=["medium"], help="dataset kind(s) to make")
+    parser.add_argument("--steps", type=int, default=100_000, help="transitions per dataset (medium-expert: per half)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default=None, help="datasets root (default $MINARI_DATASETS_PATH or ~/.minari/datasets)")
+    parser.add_argument("--name", default=None, help="dataset id prefix (default: env name in lower case)")
+    parser.add_argument("--version", type=int, default=0, help="dataset version suffix -v<N>")
+    parser.add_argument("--policy", default=None, help="SB3 zip of the medium policy (else trained with SAC)")
+    parser.add_argument("--expert-policy", default=None, help="SB3 zip of the expert policy (else trained with SAC)")
+    parser.add_argument("--policy-algo", default="sac", help="SB3 class of the policy zips (sac, td3, ddpg, ppo, tqc...)")
+    parser.add_argument("--train-steps", type=int, default=100_000, help="SAC step budget")
+    parser.add_argument("--medium-return", type=float, default=None, help="medium = first checkpoint with eval return >= this")
+    parser.add_argument("--medium-max-return", type=float, default=None, help="... and <= this")
+    parser.add_argument("--expert-return", type=float, default=None, help="stop SAC once its eval return reaches this")
+    parser.add_argument("--eval-freq", type=int, default=1000, help="SAC evaluation/checkpoint period (env steps)")
+    parser.add_argument("--eval-episodes", type=int, default=5)
+    parser.add_argument("--learning-starts", type=int, default=None, help="SAC learning_starts (default SB3's)")
+    parser.add_argument("--ref-episodes", type=int, default=MIN_REF_EPISODES, help="episodes for each reference score")
+    parser.add_argument("--ref-min-score", type=float, default=None, help="override the random-policy reference")
+    parser.add_argument("--ref-max-score", type=float, default=None, help="override the expert-policy reference")
+    parser.add_argument("--deterministic", action="store_true", help="policies act deterministically while recording")
+    parser.add_argument("--save-policies", default=None, help="folder to save the medium/expert policy zips in")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing datasets")
+    parser.add_argument("--no-progress", action="store_true")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``sb3-pola collect`` / ``python -m sb3_pola.collect``."""
+    args = make_parser().parse_args(argv)
+    if args.ref_episodes < MIN_REF_EPISODES:
+        print(f"--ref-episodes must be >= {MIN_REF_EPISODES}", file=sys.stderr)
+        return 2
+    env = gym.make(args.env)
+    if not isinstance(env.action_space, gym.spaces.Box):
+        print(f"{args.env} has action space {env.action_space}: continuous (Box) actions are needed", file=sys.stderr)
+        return 2
+    out_root = pathlib.Path(
+        args.out or os.environ.get("MINARI_DATASETS_PATH") or pathlib.Path.home() / ".minari" / "datasets"
+    ).expanduser()
+    name = args.name or default_name(args.env)
+    kinds = list(dict.fromkeys(args.kind))
+    progress = not args.no_progress
+    start_time = time.perf_counter()
+    summary: dict[str, Any] = {"env": args.env, "seed": args.seed}
+
+    for kind in kinds:
+        dataset_id = f"{name}/{kind}-v{args.version}"
+        if (out_root / dataset_id).exists() and not args.overwrite:
+            print(f"{out_root / dataset_id} exists: pass --overwrite to replace it", file=sys.stderr)
+            return 1
+
+    needs_medium = any(k in ("medium", "medium-replay", "medium-expert") for k in kinds)
+    needs_expert_data = any(k in ("expert", "medium-expert") for k in kinds)
+    needs_expert = args.ref_max_score is None or needs_expert_data
+    needs_sac = (needs_medium and args.policy is None) or (needs_expert and args.expert_policy is None)
+    needs_sac = needs_sac or "medium-replay" in kinds
+
+    model = None
+    medium_policy: PolicyFn | None = None
+    expert_policy: PolicyFn | None = None
+    medium_ckpt = expert_ckpt = None
+    if needs_sac:
+        sac_kwargs = {} if args.learning_starts is None else {"learning_starts": args.learning_starts}
+        model, checkpoints = train_sac(
+            args.env, args.train_steps, args.seed, args.eval_freq, args.eval_episodes, args.expert_return, progress, sac_kwargs
+        )
+        if not checkpoints:
+            print(f"no SAC checkpoint: --train-steps {args.train_steps} < --eval-freq {args.eval_freq}", file=sys.stderr)
+            return 2
+        summary["sac_steps"] = int(model.num_timesteps)
+        summary["checkpoints"] = [(c.step, round(c.mean_return, 1)) for c in checkpoints]
+        medium_ckpt = pick_medium(checkpoints, args.medium_return, args.medium_max_return)
+        expert_ckpt = max(checkpoints, key=lambda c: c.mean_return)
+        summary["medium_checkpoint"] = {"step": medium_ckpt.step, "eval_return": medium_ckpt.mean_return}
+        summary["expert_checkpoint"] = {"step": expert_ckpt.step, "eval_return": expert_ckpt.mean_return}
+
+    def snapshot(checkpoint: Checkpoint) -> Any:
+        assert model is not None
+        clone = copy.copy(model)
+        clone.policy = copy.deepcopy(model.policy)
+        clone.policy.load_state_dict(checkpoint.policy_state)
+        return clone
+
+    deterministic = args.deterministic
+    if needs_medium:
+        medium_model = load_policy(args.policy, args.policy_algo, env) if args.policy else snapshot(medium_ckpt)  # type: ignore[arg-type]
+        medium_policy = policy_fn(medium_model, deterministic)
+    if needs_expert and (args.expert_policy or expert_ckpt is not None):
+        expert_model = (
+            load_policy(args.expert_policy, args.policy_algo, env) if args.expert_policy else snapshot(expert_ckpt)  # type: ignore[arg-type]
+        )
+        expert_policy = policy_fn(expert_model, deterministic)
+        expert_eval = policy_fn(expert_model, True)
+    if args.save_policies:
+        folder = pathlib.Path(args.save_policies)
+        folder.mkdir(parents=True, exist_ok=True)
+        if needs_medium:
+            medium_model.save(folder / f"{name}-medium")
+        if expert_policy is not None:
+            expert_model.save(folder / f"{name}-expert")
+
+    ref_min = args.ref_min_score
+    if ref_min is None:
+        ref_min = float(np.mean(evaluate(env, None, args.ref_episodes, seed=args.seed + 20_000)))
+    ref_max = args.ref_max_score
+    if ref_max is None:
+        ref_max = float(np.mean(evaluate(env, expert_eval, args.ref_episodes, seed=args.seed + 30_000)))
+    summary.update(ref_min_score=ref_min, ref_max_score=ref_max, ref_episodes=args.ref_episodes, datasets={})
+
+    for kind in kinds:
+        dataset_id = f"{name}/{kind}-v{args.version}"
+        seed = args.seed + 1 + KINDS.index(kind) * 1000
+        acting = "deterministic" if deterministic else "stochastic"
+        if kind == "random":
+            episodes = rollout(env, None, args.steps, seed, progress, dataset_id)
+            algorithm, description = "uniform random actions", "uniform random actions"
+        elif kind == "medium":
+            episodes = rollout(env, medium_policy, args.steps, seed, progress, dataset_id)
+            algorithm = f"SAC medium (step {medium_ckpt.step})" if medium_ckpt and not args.policy else f"policy {args.policy}"
+            description = f"medium policy, {acting}"
+        elif kind == "expert":
+            episodes = rollout(env, expert_policy, args.steps, seed, progress, dataset_id)
+            algorithm = f"SAC expert (step {expert_ckpt.step})" if expert_ckpt and not args.expert_policy else "expert policy"
+            description = f"expert policy, {acting}"
+        elif kind == "medium-replay":
+            assert model is not None and medium_ckpt is not None
+            episodes = replay_episodes(model, medium_ckpt.replay_pos)
+            algorithm, description = f"SAC replay buffer up to step {medium_ckpt.step}", "SAC replay buffer up to medium"
+        else:  # medium-expert
+            episodes = rollout(env, medium_policy, args.steps, seed, progress, dataset_id + " (medium)")
+            more = rollout(env, expert_policy, args.steps, seed + 500, progress, dataset_id + " (expert)")
+            episodes += [dataclasses.replace(e, id=len(episodes) + i) for i, e in enumerate(more)]
+            algorithm, description = "medium + expert", f"medium and expert policies concatenated, {acting}"
+        path = write_dataset(
+            out_root,
+            dataset_id,
+            episodes,
+            args.env,
+            ref_min,
+            ref_max,
+            args.ref_episodes,
+            algorithm,
+            description,
+            args.overwrite,
+        )
+        returns = [float(np.sum(e.rewards)) for e in episodes]
+        size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+        summary["datasets"][dataset_id] = {
+            "path": str(path),
+            "steps": int(sum(len(e.rewards) for e in episodes)),
+            "episodes": len(episodes),
+            "mean_return": float(np.mean(returns)),
+            "bytes": size,
+        }
+    summary["seconds"] = round(time.perf_counter() - start_time, 1)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
