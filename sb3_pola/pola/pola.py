@@ -19,6 +19,24 @@ from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, PO
 SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
 
 
+def lookahead_q_objective(
+    q: th.Tensor, alive: th.Tensor, gamma_powers: th.Tensor, top_k: int
+) -> tuple[th.Tensor, th.Tensor]:
+    """``L_q`` of eq. 4 from the ensemble's Q-values along the look-ahead.
+
+    :param q: ``[N, T+1, B]`` Q-values of every member at ``(s_{t+i}, a_{t+i})``
+    :param alive: ``[T+1, B]`` 1 while no earlier or current look-ahead state is terminal, else 0
+    :param gamma_powers: ``[T+1]`` weights ``gamma^i`` (eq. 3)
+    :param top_k: number ``K`` of smallest members averaged
+    :return: the loss and the ``[T+1]`` mean top-K Q per step (masked)
+    """
+    q_top_k = q.topk(top_k, dim=0, largest=False).values.mean(dim=0)  # [T+1, B]: mean of the K smallest members
+    per_step = (alive * q_top_k).mean(dim=1)  # [T+1]
+    # scale-free Q term (Diffusion-QL): divide by the detached mean |Q| at the current states
+    q_scale = q_top_k[0].abs().mean().detach().clamp_min(1e-6)
+    return -(gamma_powers * per_step).sum() / q_scale, per_step
+
+
 class POLA(OfflineAlgorithm):
     """Policy Optimization by Looking Ahead: model-based offline RL with a diffusion policy.
 
@@ -295,12 +313,8 @@ class POLA(OfflineAlgorithm):
         self.critic.requires_grad_(False)
         q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
         self.critic.requires_grad_(True)
-        q_top_k = q.topk(self.top_k, dim=0, largest=False).values.mean(dim=0).view(horizon + 1, batch_size)  # [T+1, B]
         alive_mask = th.stack(alive)  # [T+1, B]
-        per_step = (alive_mask * q_top_k).mean(dim=1)  # [T+1]
-        # scale-free Q term (Diffusion-QL): divide by the detached mean |Q| at the current states
-        q_scale = q_top_k[0].abs().mean().detach().clamp_min(1e-6)
-        q_loss = -(self._gamma_powers * per_step).sum() / q_scale
+        q_loss, per_step = lookahead_q_objective(q.view(-1, horizon + 1, batch_size), alive_mask, self._gamma_powers, self.top_k)
         stats = {f"lookahead_q_{i}": per_step[i].detach() for i in range(horizon + 1)}
         stats["lookahead_alive"] = alive_mask[-1].mean()
         return q_loss, stats
