@@ -97,7 +97,7 @@ def rollout(
     from minari.data_collector import EpisodeBuffer
 
     env.action_space.seed(seed)
-    episodes = []
+    episodes: list[Any] = []
     obs, _ = env.reset(seed=seed)
     ep_obs, ep_act, ep_rew, ep_term, ep_trunc = [obs], [], [], [], []
     with _progress(n_steps, desc, progress) as bar:
@@ -205,13 +205,14 @@ def train_sac(
                 return True
             returns = evaluate(eval_env, policy_fn(self.model, True), eval_episodes, seed=10_000 + self.num_timesteps)
             mean = float(np.mean(returns))
-            assert self.model.replay_buffer is not None
+            replay_buffer = getattr(self.model, "replay_buffer", None)
+            assert replay_buffer is not None
             checkpoints.append(
                 Checkpoint(
                     self.num_timesteps,
                     mean,
                     copy.deepcopy(self.model.policy.state_dict()),
-                    int(self.model.replay_buffer.pos),
+                    int(replay_buffer.pos),
                 )
             )
             self.bar.set_postfix(eval_return=f"{mean:.1f}")
@@ -260,9 +261,9 @@ def replay_episodes(model: Any, end: int) -> list[Any]:
     ends = np.flatnonzero(dones)
     if len(ends) == 0 or ends[-1] != end - 1:
         ends = np.append(ends, end - 1)
-    episodes = []
+    episodes: list[Any] = []
     start = 0
-    for stop in ends + 1:
+    for stop in (ends + 1).tolist():
         terminations = dones[start:stop] & ~timeouts[start:stop]
         truncations = timeouts[start:stop].copy()
         if not terminations[-1]:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 import os
-import warnings
 import pathlib
+import warnings
 from collections.abc import Callable
 
 import gymnasium as gym

@@ -38,7 +38,7 @@ def test_reproducible_with_manual_seed(data):
     first = buffer.sample(16)
     th.manual_seed(3)
     second = buffer.sample(16)
-    for a, b in zip(first[:5], second[:5]):
+    for a, b in zip(first[:5], second[:5], strict=False):
         assert th.equal(a, b)
     assert not th.equal(buffer.sample(16).observations, first.observations)
 

@@ -1,0 +1,149 @@
+"""Data-layer benchmark: first (episode-by-episode) and cached load times, and memory.
+
+``python -m sb3_pola.benchmarks.data_bench [--quick]``. Uses the HalfCheetah datasets of
+``$MINARI_DATASETS_PATH`` (or ``--datasets``) when present, and a synthetic Minari dataset of
+1M steps (100k with ``--quick``) written to a temporary folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import pathlib
+import resource
+import tempfile
+import time
+import warnings
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sb3_pola.common.buffers import OfflineReplayBuffer
+from sb3_pola.common.datasets import load_offline_dataset
+
+SHARED = ("halfcheetah/medium-v0", "halfcheetah/medium-expert-v0")
+
+
+def _maxrss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
+
+
+def _current_rss_mb() -> float:
+    with open("/proc/self/statm") as file:
+        return int(file.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def make_synthetic(root: pathlib.Path, n_steps: int, episode_len: int = 1000, obs_dim: int = 17, act_dim: int = 6) -> str:
+    """Write a HalfCheetah-shaped random Minari dataset of ``n_steps`` steps under ``root``."""
+    import minari
+    from minari.data_collector import EpisodeBuffer
+
+    rng = np.random.default_rng(0)
+    buffers = []
+    for ep in range(n_steps // episode_len):
+        truncations = np.zeros(episode_len, bool)
+        truncations[-1] = True
+        buffers.append(
+            EpisodeBuffer(
+                id=ep,
+                observations=rng.normal(size=(episode_len + 1, obs_dim)),
+                actions=rng.uniform(-1, 1, size=(episode_len, act_dim)).astype(np.float32),
+                rewards=rng.normal(size=episode_len),
+                terminations=np.zeros(episode_len, bool),
+                truncations=truncations,
+            )
+        )
+    dataset_id = f"synthetic/steps{n_steps}-v0"
+    os.environ["MINARI_DATASETS_PATH"] = str(root)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        minari.create_dataset_from_buffers(
+            dataset_id,
+            buffers,
+            observation_space=gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float64),
+            action_space=gym.spaces.Box(-1, 1, (act_dim,), np.float32),
+            data_format="hdf5",
+        )
+    return dataset_id
+
+
+def measure(dataset: Any, cache_dir: pathlib.Path) -> dict[str, Any]:
+    """Time a first load (cache empty) and a cached load; memory of the arrays and the process."""
+    gc.collect()
+    rss_before = _current_rss_mb()
+    start = time.perf_counter()
+    data = load_offline_dataset(dataset, cache_dir=cache_dir)
+    first = time.perf_counter() - start
+    rss_after_first = _current_rss_mb()
+    del data
+    gc.collect()
+    start = time.perf_counter()
+    data = load_offline_dataset(dataset, cache_dir=cache_dir)
+    cached = time.perf_counter() - start
+    float32_bytes = sum(
+        int(np.prod(getattr(data, n).shape)) * 4 for n in ("observations", "next_observations", "actions", "rewards", "dones")
+    )
+    rss_before_buffer = _current_rss_mb()
+    buffer = OfflineReplayBuffer(data, device="cpu")
+    buffer_extra_mb = _current_rss_mb() - rss_before_buffer
+    return {
+        "steps": len(data),
+        "episodes": len(data.episode_returns),
+        "first_load_s": round(first, 3),
+        "cached_load_s": round(cached, 3),
+        "float32_mb": round(float32_bytes / 2**20, 1),
+        "arrays_mb": round(data.nbytes / 2**20, 1),
+        "arrays_over_float32": round(data.nbytes / float32_bytes, 3),
+        "rss_growth_first_load_mb": round(rss_after_first - rss_before, 1),
+        "buffer_extra_rss_mb": round(buffer_extra_mb, 1),
+        "buffer_shares_memory": bool(np.shares_memory(buffer.observations.numpy(), data.observations)),
+    }
+
+
+def run(quick: bool = False, datasets_path: str | None = None) -> dict[str, Any]:
+    """Run the benchmark; returns ``{name: figures}``.
+
+    :param quick: synthetic dataset of 100k steps instead of 1M
+    :param datasets_path: Minari root holding the HalfCheetah datasets (default ``$MINARI_DATASETS_PATH``)
+    """
+    results: dict[str, Any] = {}
+    old_path = os.environ.get("MINARI_DATASETS_PATH")
+    shared = datasets_path or old_path
+    with tempfile.TemporaryDirectory(prefix="sb3_pola_bench_") as tmp:
+        tmp_path = pathlib.Path(tmp)
+        try:
+            if shared:
+                for dataset_id in SHARED[:1] if quick else SHARED:
+                    folder = pathlib.Path(shared) / dataset_id
+                    if folder.is_dir():
+                        results[dataset_id] = measure(folder, tmp_path / "cache" / dataset_id.replace("/", "_"))
+            n_steps = 100_000 if quick else 1_000_000
+            start = time.perf_counter()
+            synthetic = make_synthetic(tmp_path / "minari", n_steps)
+            write_s = time.perf_counter() - start
+            figures = measure(tmp_path / "minari" / synthetic, tmp_path / "cache" / "synthetic")
+            figures["write_s"] = round(write_s, 1)
+            results[synthetic] = figures
+        finally:
+            if old_path is None:
+                os.environ.pop("MINARI_DATASETS_PATH", None)
+            else:
+                os.environ["MINARI_DATASETS_PATH"] = old_path
+    results["process_maxrss_mb"] = round(_maxrss_mb(), 1)
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="100k-step synthetic dataset instead of 1M")
+    parser.add_argument("--datasets", default=None, help="Minari root with the HalfCheetah datasets")
+    args = parser.parse_args(argv)
+    print(json.dumps(run(args.quick, args.datasets), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
