@@ -47,7 +47,7 @@ def default_weight_decays(n_layers: int) -> tuple[float, ...]:
     :return: ``n_layers + 1`` coefficients
     """
     hidden = DEFAULT_WEIGHT_DECAYS[:-1]
-    return tuple(hidden[min(i, len(hidden) - 1)] for i in range(n_layers)) + (DEFAULT_WEIGHT_DECAYS[-1],)
+    return (*(hidden[min(i, len(hidden) - 1)] for i in range(n_layers)), DEFAULT_WEIGHT_DECAYS[-1])
 
 
 def _safe_std(x: th.Tensor) -> th.Tensor:
@@ -420,6 +420,7 @@ class EnsembleDynamics(nn.Module):
                 break
         if pbar is not None:
             pbar.close()
+        optimizer.zero_grad(set_to_none=True)  # leave no stale gradients on the parameters
 
         # Best weights of every member, then the elites.
         with th.no_grad():
