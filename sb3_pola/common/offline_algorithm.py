@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import io
 import os
+import pathlib
 import sys
 import time
 import warnings
@@ -10,6 +12,7 @@ from collections import deque
 from typing import Any, TypeVar
 
 import numpy as np
+import torch as th
 from gymnasium import spaces
 from stable_baselines3.common import utils
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback, ProgressBarCallback
@@ -18,6 +21,7 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
+from sb3_pola.common.checkpoint import DivergenceError, validate_model_file
 from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env
 
 SelfOfflineAlgorithm = TypeVar("SelfOfflineAlgorithm", bound="OfflineAlgorithm")
@@ -37,6 +41,8 @@ def dataset_reference(dataset: Any) -> str | None:
         return dataset
     if isinstance(dataset, os.PathLike):
         return os.fspath(dataset)
+    if isinstance(dataset, OfflineDataset):
+        return dataset.dataset_id
     spec = getattr(dataset, "spec", None)
     return getattr(spec, "dataset_id", None)
 
@@ -51,7 +57,8 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
 
     :param policy: policy class or alias
     :param env: env (or its id) used for evaluation callbacks; made from the dataset if ``None``
-    :param dataset: a Minari dataset id, a path to a Minari dataset folder, or a ``minari.MinariDataset``
+    :param dataset: a Minari dataset id, a path to a Minari dataset folder, a ``minari.MinariDataset``
+        or an in-memory :class:`~sb3_pola.common.datasets.OfflineDataset`
     :param learning_rate: learning rate or schedule
     :param batch_size: minibatch size of each gradient step
     :param tau: Polyak coefficient of the target networks
@@ -85,7 +92,9 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         supported_action_spaces: tuple[type[spaces.Space], ...] | None = (spaces.Box,),
     ) -> None:
         data: OfflineDataset | None = None
-        if dataset is not None:
+        if isinstance(dataset, OfflineDataset):
+            data = dataset
+        elif dataset is not None:
             data = load_offline_dataset(dataset, env=env if not isinstance(env, str) else None, download=download)
             if env is None:
                 env = self._env_from_dataset(data, verbose)
@@ -112,11 +121,14 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         self.download = download
         self.dataset = dataset_reference(dataset)
         self._offline_data = data
+        # gradient steps between two NaN/inf checks of losses and parameters (also done at every log dump)
+        self.check_finite_freq = 100
+        self._last_finite_step = 0
         self.env_id: str | None = None
         self.ref_min_score: float | None = None
         self.ref_max_score: float | None = None
         if data is not None:
-            if self.observation_space is None:
+            if getattr(self, "observation_space", None) is None:  # SB3 leaves it unset without an env
                 self.observation_space = data.observation_space
                 self.action_space = data.action_space
             self.env_id = data.env_id
@@ -146,7 +158,10 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
                         "This model has no dataset to learn from: pass `dataset=` to the constructor "
                         "or to `load(path, dataset=...)`."
                     )
-                self._offline_data = load_offline_dataset(self.dataset, download=self.download)
+                if isinstance(self.dataset, OfflineDataset):
+                    self._offline_data = self.dataset
+                else:
+                    self._offline_data = load_offline_dataset(self.dataset, download=self.download)
                 self.dataset = dataset_reference(self.dataset)
             self._check_dataset_spaces(self._offline_data)
             self.replay_buffer = OfflineReplayBuffer(self._offline_data, device=self.device)
@@ -217,20 +232,163 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         :param reset_num_timesteps: start counting from zero (``False`` continues a previous ``learn``)
         :param progress_bar: show a progress bar
         """
-        total_timesteps, callback = self._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
+        total_timesteps, callback = self._setup_learn(
+            total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
+        )
         callback.on_training_start(locals(), globals())
         self._before_training(progress_bar=progress_bar)
+        self._last_finite_step = self.num_timesteps
         while self.num_timesteps < total_timesteps:
             self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
             self.train(gradient_steps=1, batch_size=self.batch_size)
             self.num_timesteps += 1
+            dump = log_interval > 0 and self.num_timesteps % log_interval == 0
+            # divergence guard: one host sync every check_finite_freq steps, and before the stats are dumped
+            if dump or (self.check_finite_freq > 0 and self.num_timesteps % self.check_finite_freq == 0):
+                self.check_finite()
             callback.update_locals(locals())
             if not callback.on_step():
                 break
-            if log_interval > 0 and self.num_timesteps % log_interval == 0:
+            if dump:
                 self.dump_logs()
+        self.check_finite()
         callback.on_training_end()
         return self
+
+    def check_finite(self, parameters_only: bool = False, action: str = "Training stopped") -> None:
+        """Raise :class:`~sb3_pola.common.checkpoint.DivergenceError` if a parameter or a loss is NaN or inf.
+
+        The losses checked are the training statistics accumulated since the last log dump, so a loss
+        that was non-finite at any step since then is caught. All tensors are checked with one host sync.
+
+        :param parameters_only: check the parameters (and buffers) only, not the accumulated losses
+        :param action: what is done instead, for the message
+        """
+        named: list[tuple[str, th.Tensor]] = []
+        if not parameters_only:
+            # POLA accumulates its per-step statistics (losses, Q-values, gradient norms) in _stat_sums
+            named += [(f"loss {key!r}", value) for key, value in getattr(self, "_stat_sums", {}).items()]
+        policy = getattr(self, "policy", None)
+        if policy is not None:
+            named += [(f"parameter {key!r}", value) for key, value in policy.state_dict().items() if value.is_floating_point()]
+        if not named:
+            return
+        finite = th.stack([th.isfinite(value).all() for _, value in named]).cpu().tolist()
+        if all(finite):
+            if not parameters_only:
+                self._last_finite_step = self.num_timesteps
+            return
+        bad = [name for (name, _), ok in zip(named, finite, strict=True) if not ok]
+        shown = ", ".join(bad[:6]) + (f" and {len(bad) - 6} more" if len(bad) > 6 else "")
+        raise DivergenceError(
+            f"Training diverged: NaN or inf in {shown} at gradient step {self.num_timesteps} (first non-finite "
+            f"after step {self._last_finite_step}, when all were last found finite). {action}. Try a lower learning "
+            "rate or max_grad_norm, and check the dataset for NaN/inf; set check_finite_freq=1 to find the exact step."
+        )
+
+    def save(
+        self,
+        path: str | pathlib.Path | io.BufferedIOBase,
+        exclude: Any = None,
+        include: Any = None,
+        check_finite: bool = True,
+    ) -> None:
+        """Save the model (SB3 zip); refuses NaN/inf weights so a diverged model never replaces a good one.
+
+        :param path: file path or file object
+        :param exclude: attributes not to save
+        :param include: attributes to save even if excluded by default
+        :param check_finite: raise :class:`~sb3_pola.common.checkpoint.DivergenceError` instead of saving
+            non-finite parameters (``False`` saves them anyway, e.g. for debugging)
+        """
+        if check_finite:
+            self.check_finite(parameters_only=True, action=f"Not saving {path} (pass check_finite=False to save it anyway)")
+        super().save(path, exclude=exclude, include=include)
+
+    @classmethod
+    def load(  # type: ignore[override]
+        cls: type[SelfOfflineAlgorithm],
+        path: str | pathlib.Path | io.BufferedIOBase,
+        env: GymEnv | None = None,
+        device: th.device | str = "auto",
+        custom_objects: dict[str, Any] | None = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        **kwargs: Any,
+    ) -> SelfOfflineAlgorithm:
+        """Load a model (SB3's ``load``), with clear errors for missing, truncated, corrupt or foreign files.
+
+        :param path: model file (``.zip`` may be omitted)
+        :param env: env to attach; its spaces must equal the model's
+        :param device: device of the loaded model
+        :param custom_objects: objects replacing saved ones (SB3)
+        :param print_system_info: print the saving and current system info
+        :param force_reset: reset the env before training (SB3)
+        :param kwargs: attributes to change, e.g. ``dataset=`` to continue training
+        :raises FileNotFoundError: no such file
+        :raises ~sb3_pola.common.checkpoint.ModelFileError: truncated, corrupt, or saved by another algorithm
+        :raises ValueError: ``env`` has other spaces than the model
+        """
+        if isinstance(path, str | os.PathLike):
+            policies = tuple(dict.fromkeys(cls.policy_aliases.values()))
+            data = validate_model_file(path, policies, cls.__name__)
+            if env is not None:
+                obs_space, act_space = env.observation_space, env.action_space
+                if obs_space != data["observation_space"] or act_space != data["action_space"]:
+                    raise ValueError(
+                        f"Cannot load {path} onto this env: the model has observation space {data['observation_space']} "
+                        f"and action space {data['action_space']}, the env has observation space {obs_space} "
+                        f"and action space {act_space}"
+                    )
+        return super().load(  # type: ignore[return-value]
+            path,
+            env=env,
+            device=device,
+            custom_objects=custom_objects,
+            print_system_info=print_system_info,
+            force_reset=force_reset,
+            **kwargs,
+        )
+
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """SB3's ``predict``, after checking the observation's shape and that it holds no NaN or inf.
+
+        :param observation: one observation ``obs_shape`` or a batch ``[n, *obs_shape]``
+        :param state: recurrent state (unused)
+        :param episode_start: episode starts (unused)
+        :param deterministic: deterministic action
+        :return: the action(s) and the state
+        """
+        self._check_observation(observation)
+        return super().predict(observation, state, episode_start, deterministic)
+
+    def _check_observation(self, observation: Any) -> None:
+        space = self.observation_space
+        if isinstance(observation, dict) or not isinstance(space, spaces.Box):
+            return
+        obs = np.asarray(observation)
+        expected = space.shape
+        if not (obs.shape == expected or (obs.ndim == len(expected) + 1 and obs.shape[1:] == expected)):
+            raise ValueError(
+                f"predict got an observation of shape {obs.shape}; this model expects {expected} (one observation) "
+                f"or (n, {', '.join(map(str, expected))}) (a batch), for observation space {space}"
+            )
+        if not (np.issubdtype(obs.dtype, np.number) or obs.dtype == np.bool_):
+            raise ValueError(f"predict got an observation of dtype {obs.dtype}; it needs numbers")
+        finite = np.isfinite(obs)
+        if not finite.all():
+            where = [tuple(int(i) for i in index) for index in np.argwhere(~finite)[:3]]
+            values = [obs[index] for index in where]
+            raise ValueError(
+                f"predict got an observation with NaN or inf ({int((~finite).sum())} values, e.g. at index "
+                f"{', '.join(f'{w}: {v}' for w, v in zip(where, values, strict=True))}); the policy's actions would be NaN"
+            )
 
     def _record_train_stats(self) -> None:
         """Hook: write the accumulated ``train/*`` statistics to the logger."""

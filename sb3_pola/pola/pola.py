@@ -212,7 +212,10 @@ class POLA(OfflineAlgorithm):
     # ------------------------------------------------------------------ dynamics model
     def _before_training(self, progress_bar: bool = False) -> None:
         dynamics = self.policy.dynamics
-        if dynamics is None or bool(self.policy.dynamics_fitted):
+        if dynamics is None:
+            return
+        if bool(self.policy.dynamics_fitted):
+            dynamics.freeze()  # a loaded model (resume) rebuilt the model with trainable parameters
             return
         buffer = self._setup_offline_data()
         fit_kwargs = {"progress_bar": progress_bar, "logger": self.logger, "verbose": self.verbose, **self.dynamics_fit_kwargs}
