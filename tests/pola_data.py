@@ -1,0 +1,79 @@
+"""Small Minari datasets recorded from real Gymnasium envs, for the algorithm's tests."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import warnings
+
+import gymnasium as gym
+import numpy as np
+
+
+def record_random_dataset(root: pathlib.Path, dataset_id: str, env_id: str, n_steps: int, seed: int = 0) -> pathlib.Path:
+    """Roll out uniform random actions in ``env_id`` for ``n_steps`` and write a Minari dataset (with its env spec)."""
+    import minari
+    from minari.data_collector import EpisodeBuffer
+
+    env = gym.make(env_id)
+    env.action_space.seed(seed)
+    buffers, steps, episode = [], 0, 0
+    while steps < n_steps:
+        obs, _ = env.reset(seed=seed + episode)
+        observations, actions, rewards, terms, truncs = [obs], [], [], [], []
+        done = False
+        while not done:
+            action = env.action_space.sample()
+            obs, reward, terminated, truncated, _ = env.step(action)
+            observations.append(obs)
+            actions.append(action)
+            rewards.append(reward)
+            terms.append(terminated)
+            truncs.append(truncated)
+            steps += 1
+            done = terminated or truncated or steps >= n_steps
+        truncs[-1] = truncs[-1] or not terms[-1]
+        buffers.append(
+            EpisodeBuffer(
+                id=episode,
+                observations=np.array(observations),
+                actions=np.array(actions),
+                rewards=np.array(rewards),
+                terminations=np.array(terms),
+                truncations=np.array(truncs),
+            )
+        )
+        episode += 1
+    old = os.environ.get("MINARI_DATASETS_PATH")
+    os.environ["MINARI_DATASETS_PATH"] = str(root)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            minari.create_dataset_from_buffers(
+                dataset_id=dataset_id, buffer=buffers, env=env, algorithm_name="random", data_format="hdf5"
+            )
+    finally:
+        if old is None:
+            os.environ.pop("MINARI_DATASETS_PATH", None)
+        else:
+            os.environ["MINARI_DATASETS_PATH"] = old
+    env.close()
+    return root / dataset_id
+
+
+def light_kwargs(**overrides) -> dict:
+    """A configuration small enough for unit tests on a CPU."""
+    kwargs: dict = dict(
+        n_critics=3,
+        top_k=2,
+        rollout_length=2,
+        batch_size=32,
+        ema_start=10,
+        policy_kwargs=dict(net_arch=[32, 32]),
+        dynamics_kwargs=dict(n_members=2, n_elites=1, hidden_dim=32, n_layers=2),
+        dynamics_fit_kwargs=dict(max_epochs=1),
+        seed=0,
+        device="cpu",
+    )
+    kwargs.update(overrides)
+    return kwargs
