@@ -56,7 +56,7 @@ bench-quick: $(STAMP)
 	$(PY) -m sb3_pola.cli bench --quick --out benchmarks/results
 
 score: $(STAMP)
-	$(PY) -m sb3_pola.cli score
+	$(PY) -m sb3_pola.cli score $(SCORE_ARGS)
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info .pytest_cache .mypy_cache .ruff_cache outputs

@@ -1,0 +1,649 @@
+"""``sb3-pola score``: POLA and its ablations over datasets and seeds, learning curves, a Table-I-style table.
+
+Every (dataset, variant, seed) *cell* trains one POLA model for ``--steps`` gradient steps and
+evaluates its EMA policy every ``--eval-freq`` steps on ``--eval-episodes`` episodes of the
+dataset's env (D4RL-normalised score from the dataset's reference scores). Outputs, all under
+``--out``:
+
+- ``scores.csv``: one row per evaluation (written as it happens);
+- ``table.md``: final and best score, mean +- std over seeds, next to the paper's Table I;
+- ``fig_rollout_<dataset>.png`` (paper Fig. 3: T in {0, 1, 3, 5}) and
+  ``fig_products_<dataset>.png`` (paper Fig. 4: products on/off/in the critic), BC as the floor;
+- ``config.json`` (budget, machine, date), ``cells/`` (finished cells), ``ckpt/`` (a checkpoint
+  per running cell, saved at every evaluation) and ``dynamics/`` (fitted dynamics models).
+
+An interrupted run is resumed by the same command: finished cells are skipped, a running cell
+continues from its last checkpoint. Presets: ``cpu`` (light networks, a few thousand steps),
+``paper`` (the paper's configuration, for a CUDA GPU), ``auto`` (``paper`` on CUDA, else ``cpu``).
+Any preset value can be overridden from the command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import hashlib
+import json
+import math
+import os
+import pathlib
+import platform
+import re
+import sys
+import time
+from collections import defaultdict
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any, cast
+
+import numpy as np
+
+# ----------------------------------------------------------------------------------------- variants
+
+# name -> (label for legends, POLA keyword arguments, policy_kwargs)
+VARIANTS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
+    "T0": ("POLA T=0 (no look-ahead)", {"rollout_length": 0}, {}),
+    "T1": ("POLA T=1", {"rollout_length": 1}, {}),
+    "T3": ("POLA T=3", {"rollout_length": 3}, {}),
+    "T5": ("POLA T=5", {"rollout_length": 5}, {}),
+    "T0-noproducts": ("T=0, no products", {"rollout_length": 0, "use_state_products": False}, {}),
+    "T3-noproducts": ("T=3, no products", {"rollout_length": 3, "use_state_products": False}, {}),
+    "T3-criticproducts": ("T=3, products in actor and critic", {"rollout_length": 3}, {"critic_state_products": True}),
+    "BC": ("BC (diffusion actor, eta=0)", {"rollout_length": 0, "eta": 0.0}, {}),
+}
+ALL_VARIANTS = list(VARIANTS)
+# the variants of each figure (paper Fig. 3 and Fig. 4); BC is drawn in both as the floor
+FIGURES: dict[str, list[str]] = {
+    "rollout": ["T0", "T1", "T3", "T5", "BC"],
+    "products": ["T3", "T3-noproducts", "T3-criticproducts", "T0", "T0-noproducts", "BC"],
+}
+
+# POLA's numbers in the paper's Table I (D4RL MuJoCo v2, mean +- std over 10 replications)
+PAPER_TABLE_I: dict[tuple[str, str], str] = {
+    ("halfcheetah", "medium-expert"): "111.2 ± 2.4",
+    ("halfcheetah", "medium-replay"): "62.1 ± 1.3",
+    ("halfcheetah", "medium"): "71.8 ± 0.4",
+    ("halfcheetah", "random"): "33.7 ± 1.9",
+    ("hopper", "medium-expert"): "111.3 ± 1.7",
+    ("hopper", "medium-replay"): "102.1 ± 1.8",
+    ("hopper", "medium"): "92.3 ± 4.2",
+    ("hopper", "random"): "31.6 ± 0.8",
+    ("walker2d", "medium-expert"): "118.7 ± 0.2",
+    ("walker2d", "medium-replay"): "89.2 ± 1.3",
+    ("walker2d", "medium"): "104.3 ± 0.6",
+    ("walker2d", "random"): "21.6 ± 1.4",
+}
+
+
+def paper_task(dataset_id: str) -> tuple[str, str] | None:
+    """The paper's (env, quality) of a dataset id: ``halfcheetah/medium-v0`` -> ``("halfcheetah", "medium")``.
+
+    :param dataset_id: Minari id (``halfcheetah/medium-v0``, ``mujoco/hopper/medium-v0``) or D4RL name
+    :return: the task key of :data:`PAPER_TABLE_I`, or ``None``
+    """
+    name = dataset_id.lower()
+    env = next((e for e in ("halfcheetah", "hopper", "walker2d") if e in name), None)
+    if env is None:
+        return None
+    rest = name.split(env, 1)[1]
+    for quality in ("medium-expert", "medium-replay", "medium", "random"):  # longest names first
+        if re.search(rf"(^|[/_-]){quality}($|[/_-])", rest):
+            return env, quality
+    return None
+
+
+# ----------------------------------------------------------------------------------------- presets
+
+
+@dataclass
+class Config:
+    """Everything that decides a cell's result (a change of any field is another experiment).
+
+    :param preset: name of the preset this came from
+    :param steps: gradient steps per cell
+    :param eval_freq: gradient steps between evaluations
+    :param eval_episodes: episodes per evaluation
+    :param batch_size: minibatch size
+    :param net_arch: hidden sizes of actor and critics
+    :param n_critics: critic ensemble size ``N``
+    :param top_k: ``K`` smallest Q-values averaged in the policy loss
+    :param n_action_samples: candidate actions per state at evaluation (picked by the critic)
+    :param dynamics_kwargs: arguments of the dynamics ensemble
+    :param dynamics_fit_kwargs: arguments of its fit
+    :param share_dynamics: fit the dynamics model once per dataset (first seed) and share it across seeds
+    :param extra: further POLA keyword arguments
+    """
+
+    preset: str
+    steps: int
+    eval_freq: int
+    eval_episodes: int
+    batch_size: int = 256
+    net_arch: list[int] = field(default_factory=lambda: [256, 256, 256])
+    n_critics: int = 10
+    top_k: int = 2
+    n_action_samples: int = 1
+    dynamics_kwargs: dict[str, Any] = field(default_factory=dict)
+    dynamics_fit_kwargs: dict[str, Any] = field(default_factory=dict)
+    share_dynamics: bool = False
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def signature(self) -> str:
+        """Short hash of the fields (the preset's name excluded)."""
+        data = {k: v for k, v in asdict(self).items() if k != "preset"}
+        return hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
+
+
+PRESETS: dict[str, Config] = {
+    # a few gradient steps/s per cell on a shared CPU core: light nets, small ensemble, short budget
+    "cpu": Config(
+        preset="cpu",
+        steps=3000,
+        eval_freq=1000,
+        eval_episodes=5,
+        batch_size=128,
+        net_arch=[128, 128],
+        n_critics=5,
+        top_k=2,
+        n_action_samples=1,
+        dynamics_fit_kwargs={"max_steps": 2000},
+        share_dynamics=True,
+    ),
+    # the paper's configuration (N = 10, 3 x 256, batch 256), Diffusion-QL's 50 candidate actions
+    "paper": Config(
+        preset="paper",
+        steps=1_000_000,
+        eval_freq=10_000,
+        eval_episodes=10,
+        batch_size=256,
+        net_arch=[256, 256, 256],
+        n_critics=10,
+        top_k=2,
+        n_action_samples=50,
+    ),
+}
+DEFAULT_DATASETS = ["halfcheetah/medium-v0", "halfcheetah/medium-replay-v0"]
+DEFAULT_VARIANTS = ["T0", "T1", "T3", "T5", "T3-noproducts", "T3-criticproducts", "BC"]
+CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s"]
+
+
+def resolve_device(device: str) -> str:
+    """``auto`` -> ``cuda`` when available, else ``cpu``."""
+    if device != "auto":
+        return device
+    import torch as th
+
+    return "cuda" if th.cuda.is_available() else "cpu"
+
+
+def build_config(args: argparse.Namespace, device: str) -> Config:
+    """The preset (``auto``: ``paper`` on CUDA, else ``cpu``) with the command line's overrides."""
+    preset = args.preset if args.preset != "auto" else ("paper" if device.startswith("cuda") else "cpu")
+    config = replace(PRESETS[preset])
+    overrides = {
+        "steps": args.steps,
+        "eval_freq": args.eval_freq,
+        "eval_episodes": args.eval_episodes,
+        "batch_size": args.batch_size,
+        "net_arch": args.net_arch,
+        "n_critics": args.n_critics,
+        "top_k": args.top_k,
+        "n_action_samples": args.n_action_samples,
+    }
+    config = replace(config, **{k: v for k, v in overrides.items() if v is not None})
+    if args.dynamics_steps is not None:
+        config.dynamics_fit_kwargs = {**config.dynamics_fit_kwargs, "max_steps": args.dynamics_steps}
+    if args.dynamics_kwargs:
+        config.dynamics_kwargs = {**config.dynamics_kwargs, **json.loads(args.dynamics_kwargs)}
+    if args.share_dynamics is not None:
+        config.share_dynamics = args.share_dynamics
+    if args.extra:
+        config.extra = {**config.extra, **json.loads(args.extra)}
+    config.top_k = min(config.top_k, config.n_critics)
+    if config.steps < 1 or config.eval_freq < 1 or config.eval_episodes < 1:
+        raise ValueError("steps, eval_freq and eval_episodes must be positive")
+    return config
+
+
+# ----------------------------------------------------------------------------------------- one cell
+
+
+def slug(text: str) -> str:
+    """File-name-safe version of a dataset id or variant."""
+    return re.sub(r"[^A-Za-z0-9.-]+", "_", text).strip("_")
+
+
+def cell_name(dataset: str, variant: str, seed: int) -> str:
+    return f"{slug(dataset)}__{variant}__seed{seed}"
+
+
+def evaluate(model: Any, env: Any, n_episodes: int, seed: int) -> np.ndarray:
+    """Returns of ``n_episodes`` deterministic episodes of the model's EMA policy (episode ``i`` reset with ``seed + i``).
+
+    :param model: a POLA model
+    :param env: a Gymnasium env (not vectorised)
+    :param n_episodes: number of episodes
+    :param seed: seed of the first episode's reset
+    :return: ``[n_episodes]`` undiscounted returns
+    """
+    returns = np.zeros(n_episodes)
+    for i in range(n_episodes):
+        obs, _ = env.reset(seed=seed + i)
+        done = False
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            returns[i] += float(reward)
+            done = terminated or truncated
+    return returns
+
+
+def _nan_if_none(value: float | None) -> float:
+    return math.nan if value is None else float(value)
+
+
+def read_rows(csv_path: pathlib.Path) -> list[dict[str, Any]]:
+    """Rows of ``scores.csv`` with numbers parsed (empty list if there is no file)."""
+    if not csv_path.exists():
+        return []
+    rows = []
+    with csv_path.open(newline="") as f:
+        for row in csv.DictReader(f):
+            parsed: dict[str, Any] = dict(row)
+            parsed["seed"], parsed["step"], parsed["eval_episodes"] = (
+                int(row["seed"]),
+                int(row["step"]),
+                int(row["eval_episodes"]),
+            )
+            for key in ("score", "score_std", "mean_return", "wall_s"):
+                parsed[key] = float(row[key]) if row[key] not in ("", "None") else math.nan
+            rows.append(parsed)
+    return rows
+
+
+def write_rows(csv_path: pathlib.Path, rows: list[dict[str, Any]]) -> None:
+    """Rewrite ``scores.csv`` atomically."""
+    tmp = csv_path.with_suffix(".tmp")
+    with tmp.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        writer.writeheader()
+        writer.writerows({k: row[k] for k in CSV_FIELDS} for row in rows)
+    tmp.replace(csv_path)
+
+
+def append_row(csv_path: pathlib.Path, row: dict[str, Any]) -> None:
+    new = not csv_path.exists()
+    with csv_path.open("a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        if new:
+            writer.writeheader()
+        writer.writerow({k: row[k] for k in CSV_FIELDS})
+        f.flush()
+
+
+def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib.Path, device: str, verbose: int = 1) -> None:
+    """Train and evaluate one (dataset, variant, seed) cell, resuming from its checkpoint if there is one.
+
+    :param dataset: Minari dataset id
+    :param variant: a key of :data:`VARIANTS`
+    :param seed: random seed of the model (and of the evaluation resets)
+    :param config: budget and hyperparameters
+    :param out: output folder
+    :param device: torch device
+    :param verbose: 0 silent, 1 a line per evaluation
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from sb3_pola.common.datasets import make_env
+    from sb3_pola.pola import POLA
+
+    _, kwargs, policy_kwargs = VARIANTS[variant]
+    name = cell_name(dataset, variant, seed)
+    csv_path, ckpt = out / "scores.csv", out / "ckpt" / f"{name}.zip"
+    ckpt.parent.mkdir(parents=True, exist_ok=True)
+    dyn_seed = "shared" if config.share_dynamics else f"seed{seed}"
+    dyn_path = out / "dynamics" / f"{slug(dataset)}__{dyn_seed}.pt"
+    dyn_path.parent.mkdir(parents=True, exist_ok=True)
+    previous_wall = 0.0
+    rows = [r for r in read_rows(csv_path) if (r["dataset"], r["variant"], r["seed"]) == (dataset, variant, seed)]
+    if ckpt.exists():
+        model = POLA.load(ckpt, dataset=dataset, device=device)
+        done_steps = model.num_timesteps
+        if rows:
+            previous_wall = max((r["wall_s"] for r in rows if r["step"] <= done_steps), default=0.0)
+        if verbose:
+            print(f"[score] {name}: resuming from step {done_steps}")
+    else:
+        model = POLA(
+            "MlpPolicy",
+            dataset=dataset,
+            batch_size=config.batch_size,
+            n_critics=config.n_critics,
+            top_k=config.top_k,
+            dynamics_kwargs=config.dynamics_kwargs,
+            dynamics_fit_kwargs=config.dynamics_fit_kwargs,
+            policy_kwargs={"net_arch": config.net_arch, "n_action_samples": config.n_action_samples, **policy_kwargs},
+            seed=seed,
+            device=device,
+            **{**config.extra, **kwargs},
+        )
+        done_steps = 0
+        dynamics = model.policy.dynamics
+        if dynamics is not None and dyn_path.exists():
+            import torch as th
+
+            dynamics.load_state_dict(th.load(dyn_path, map_location=device))
+            dynamics.requires_grad_(False).eval()  # as EnsembleDynamics.freeze
+            cast(th.Tensor, model.policy.dynamics_fitted).fill_(True)
+    # drop evaluations made after the checkpoint (an interruption between an evaluation and its checkpoint)
+    all_rows = read_rows(csv_path)
+    kept = [
+        r for r in all_rows if (r["dataset"], r["variant"], r["seed"]) != (dataset, variant, seed) or r["step"] <= done_steps
+    ]
+    if len(kept) != len(all_rows):
+        write_rows(csv_path, kept)
+    remaining = config.steps - done_steps
+    env = make_env(model._offline_data if model._offline_data is not None else dataset)
+    start = time.perf_counter()
+
+    class ScoreCallback(BaseCallback):
+        """Saves the fitted dynamics model once; evaluates, logs a CSV row and checkpoints every ``eval_freq`` steps."""
+
+        def _on_step(self) -> bool:
+            dynamics = model.policy.dynamics
+            if dynamics is not None and not dyn_path.exists() and bool(model.policy.dynamics_fitted):
+                import torch as th
+
+                th.save(dynamics.state_dict(), dyn_path)
+            step = model.num_timesteps
+            if step % config.eval_freq == 0 or step == config.steps:
+                returns = evaluate(model, env, config.eval_episodes, seed=10_000 * (seed + 1))
+                scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
+                row = {
+                    "dataset": dataset,
+                    "variant": variant,
+                    "seed": seed,
+                    "step": step,
+                    "score": round(float(np.mean(scores)), 3),
+                    "score_std": round(float(np.std(scores)), 3),
+                    "mean_return": round(float(np.mean(returns)), 2),
+                    "eval_episodes": config.eval_episodes,
+                    "wall_s": round(previous_wall + time.perf_counter() - start, 1),
+                }
+                append_row(csv_path, row)
+                model.save(ckpt)
+                if verbose:
+                    print(
+                        f"[score] {name} step {step}: score {row['score']:.1f} "
+                        f"(return {row['mean_return']:.0f}), {row['wall_s']:.0f}s"
+                    )
+                    sys.stdout.flush()
+            return True
+
+    if remaining > 0:
+        model.learn(remaining, callback=ScoreCallback(), reset_num_timesteps=done_steps == 0, log_interval=0)
+    env.close()
+    marker = out / "cells" / f"{name}.json"
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    info = {"dataset": dataset, "variant": variant, "seed": seed, "steps": config.steps, "signature": config.signature()}
+    info["wall_s"] = round(previous_wall + time.perf_counter() - start, 1)
+    info["dynamics_fit"] = {k: float(v) for k, v in getattr(model, "dynamics_fit_info", {}).items()}
+    marker.write_text(json.dumps(info, indent=1))
+    ckpt.unlink(missing_ok=True)  # the cell is finished; its rows are in the CSV
+
+
+# ----------------------------------------------------------------------------------------- reports
+
+
+def _fmt(values: list[float]) -> str:
+    values = [v for v in values if not math.isnan(v)]
+    if not values:
+        return "-"
+    std = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+    return f"{np.mean(values):.1f} ± {std:.1f}"
+
+
+def summarize(rows: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
+    """Per (dataset, variant): final and best score per seed, the last step reached and the seeds.
+
+    ``final`` is the score of each seed's last evaluation, ``best`` the maximum over its evaluations.
+    """
+    by_cell: dict[tuple[str, str, int], list[dict[str, Any]]] = defaultdict(list)
+    for row in rows:
+        by_cell[(row["dataset"], row["variant"], row["seed"])].append(row)
+    out: dict[tuple[str, str], dict[str, Any]] = {}
+    for (dataset, variant, seed), cell in sorted(by_cell.items()):
+        cell.sort(key=lambda r: r["step"])
+        entry = out.setdefault((dataset, variant), {"final": [], "best": [], "steps": [], "seeds": [], "wall_s": []})
+        entry["final"].append(cell[-1]["score"])
+        entry["best"].append(max(r["score"] for r in cell))
+        entry["steps"].append(cell[-1]["step"])
+        entry["seeds"].append(seed)
+        entry["wall_s"].append(cell[-1]["wall_s"])
+    return out
+
+
+def dataset_score(dataset: str) -> float | None:
+    """Mean normalised return of the dataset's own episodes (what pure imitation would reach)."""
+    try:
+        from sb3_pola.common.datasets import load_offline_dataset
+
+        data = load_offline_dataset(dataset)
+        if len(data.episode_returns) == 0:
+            return None
+        return data.normalized_score(data.episode_returns)
+    except Exception:  # a report must not fail on a dataset that moved
+        return None
+
+
+def markdown_table(rows: list[dict[str, Any]], variants: list[str], config: dict[str, Any] | None = None) -> str:
+    """Table-I-style markdown: one line per (dataset, variant), final and best score mean ± std over seeds."""
+    summary = summarize(rows)
+    lines = []
+    if config:
+        lines.append(
+            f"Budget: {config.get('steps')} gradient steps per run, evaluation every {config.get('eval_freq')} steps "
+            f"on {config.get('eval_episodes')} episodes (preset `{config.get('preset')}`, device {config.get('device')})."
+        )
+        lines.append("")
+    lines.append("| dataset | variant | final | best | seeds | steps | wall s / run | dataset mean | paper POLA (D4RL v2) |")
+    lines.append("|---|---|---|---|---|---|---|---|---|")
+    datasets = list(dict.fromkeys(r["dataset"] for r in rows))
+    for dataset in datasets:
+        task = paper_task(dataset)
+        paper = PAPER_TABLE_I.get(task, "-") if task else "-"
+        data_score = dataset_score(dataset)
+        data_text = "-" if data_score is None else f"{data_score:.1f}"
+        ordered = [v for v in variants if (dataset, v) in summary] + sorted(
+            v for (d, v) in summary if d == dataset and v not in variants
+        )
+        for variant in ordered:
+            entry = summary[(dataset, variant)]
+            steps = "/".join(str(s) for s in sorted(set(entry["steps"])))
+            seeds = ",".join(str(s) for s in entry["seeds"])
+            wall = f"{np.mean(entry['wall_s']):.0f}"
+            lines.append(
+                f"| {dataset} | {variant} | {_fmt(entry['final'])} | {_fmt(entry['best'])} | {seeds} | {steps} | {wall} "
+                f"| {data_text} | {paper} |"
+            )
+    lines.append("")
+    lines.append(
+        "final: score of the last evaluation; best: best evaluation of each run; mean ± sample std over seeds "
+        "(± 0.0 with one seed). Scores are D4RL-normalised (100 = the dataset's reference expert)."
+    )
+    return "\n".join(lines) + "\n"
+
+
+def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.Path]:
+    """Learning curves like the paper's Fig. 3 (rollout length) and Fig. 4 (products), a PNG per dataset and figure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curves: dict[tuple[str, str], dict[int, dict[int, float]]] = defaultdict(lambda: defaultdict(dict))
+    for row in rows:
+        curves[(row["dataset"], row["variant"])][row["step"]][row["seed"]] = row["score"]
+    written = []
+    colors = {
+        "T0": "tab:blue",
+        "T1": "tab:orange",
+        "T3": "tab:red",
+        "T5": "tab:green",
+        "T3-noproducts": "tab:cyan",
+        "T0-noproducts": "tab:olive",
+        "T3-criticproducts": "tab:purple",
+        "BC": "tab:gray",
+    }
+    for dataset in dict.fromkeys(r["dataset"] for r in rows):
+        for figure, members in FIGURES.items():
+            present = [v for v in members if (dataset, v) in curves]
+            if len([v for v in present if v != "BC"]) < 2:
+                continue  # a comparison needs two variants
+            fig, ax = plt.subplots(figsize=(5.5, 3.6), dpi=90)
+            for variant in present:
+                by_step = curves[(dataset, variant)]
+                steps = sorted(by_step)
+                mean = np.array([np.mean(list(by_step[s].values())) for s in steps])
+                std = np.array([np.std(list(by_step[s].values())) for s in steps])
+                n_seeds = max(len(by_step[s]) for s in steps)
+                style = "--" if variant == "BC" else "-"
+                ax.plot(
+                    steps,
+                    mean,
+                    style,
+                    marker="o",
+                    ms=3,
+                    color=colors.get(variant),
+                    label=f"{VARIANTS[variant][0]} (n={n_seeds})",
+                )
+                if n_seeds > 1:
+                    ax.fill_between(steps, mean - std, mean + std, color=colors.get(variant), alpha=0.15)
+            title = "rollout length T" if figure == "rollout" else "state products"
+            ax.set_title(f"{dataset}: {title}", fontsize=10)
+            ax.set_xlabel("gradient steps")
+            ax.set_ylabel("normalised score")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7)
+            fig.tight_layout()
+            path = out / f"fig_{figure}_{slug(dataset)}.png"
+            fig.savefig(path)
+            plt.close(fig)
+            written.append(path)
+    return written
+
+
+def write_reports(out: pathlib.Path, variants: list[str], config: dict[str, Any] | None = None) -> None:
+    """``table.md`` and the figures from ``scores.csv``."""
+    rows = read_rows(out / "scores.csv")
+    if not rows:
+        print(f"[score] no evaluations in {out / 'scores.csv'} yet")
+        return
+    (out / "table.md").write_text(markdown_table(rows, variants, config))
+    paths = plot_curves(rows, out)
+    print(f"[score] wrote {out / 'table.md'}" + "".join(f", {p.name}" for p in paths))
+
+
+# ----------------------------------------------------------------------------------------- command line
+
+
+def machine_info(device: str) -> str:
+    text = f"{platform.node() or 'host'}: {platform.processor() or platform.machine()}, {os.cpu_count()} CPU cores"
+    if device.startswith("cuda"):
+        import torch as th
+
+        text += f", {th.cuda.get_device_name(0)}"
+    return text
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="sb3-pola score",
+        description="Train POLA and its ablations over datasets and seeds; write scores.csv, table.md and learning curves.",
+    )
+    parser.add_argument("--preset", choices=["auto", *PRESETS], default="auto", help="auto: paper on CUDA, cpu otherwise")
+    parser.add_argument("--datasets", nargs="+", default=DEFAULT_DATASETS, help="Minari dataset ids")
+    parser.add_argument("--variants", nargs="+", default=DEFAULT_VARIANTS, choices=ALL_VARIANTS, metavar="VARIANT")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    parser.add_argument("--steps", type=int, help="gradient steps per run")
+    parser.add_argument("--eval-freq", type=int, help="gradient steps between evaluations")
+    parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation")
+    parser.add_argument("--batch-size", type=int)
+    parser.add_argument("--net-arch", type=int, nargs="+", help="hidden sizes of actor and critics")
+    parser.add_argument("--n-critics", type=int)
+    parser.add_argument("--top-k", type=int)
+    parser.add_argument("--n-action-samples", type=int, help="candidate actions per state at evaluation")
+    parser.add_argument("--dynamics-steps", type=int, help="cap on the dynamics model's fit (gradient steps)")
+    parser.add_argument("--dynamics-kwargs", help="JSON of EnsembleDynamics arguments, e.g. '{\"hidden_dim\": 128}'")
+    parser.add_argument(
+        "--share-dynamics", action=argparse.BooleanOptionalAction, default=None, help="one dynamics fit per dataset"
+    )
+    parser.add_argument("--extra", help="JSON of further POLA arguments, e.g. '{\"eta\": 0.5}'")
+    parser.add_argument("--device", default="auto", help="cpu, cuda, cuda:1 or auto")
+    parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
+    parser.add_argument("--out", default="results/score", help="output folder")
+    parser.add_argument("--threads", type=int, help="torch CPU threads")
+    parser.add_argument("--report-only", action="store_true", help="only rewrite table.md and the figures from scores.csv")
+    parser.add_argument("--dry-run", action="store_true", help="print the resolved configuration and the cells, run nothing")
+    parser.add_argument("-v", "--verbose", type=int, default=1)
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``sb3-pola score``; returns the exit code."""
+    args = parse_args(argv)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.data_dir:
+        os.environ["MINARI_DATASETS_PATH"] = str(pathlib.Path(args.data_dir).resolve())
+    config_path = out / "config.json"
+    if args.report_only:
+        saved = json.loads(config_path.read_text()) if config_path.exists() else None
+        write_reports(out, args.variants, saved)
+        return 0
+    if args.threads:
+        import torch as th
+
+        th.set_num_threads(args.threads)
+    device = resolve_device(args.device)
+    config = build_config(args, device)
+    cells = [(d, v, s) for s in args.seeds for d in args.datasets for v in args.variants]
+    info = {
+        **asdict(config),
+        "signature": config.signature(),
+        "device": device,
+        "machine": machine_info(device),
+        "date": datetime.date.today().isoformat(),
+        "command": "sb3-pola score " + " ".join(sys.argv[1:] if argv is None else argv),
+    }
+    if config_path.exists():
+        saved = json.loads(config_path.read_text())
+        if saved.get("signature") != config.signature():
+            print(
+                f"[score] {out} holds runs of another configuration (signature {saved.get('signature')}, this one "
+                f"{config.signature()}): use another --out, or the same options",
+                file=sys.stderr,
+            )
+            return 2
+        info["started"] = saved.get("started", info["date"])
+    else:
+        info["started"] = info["date"]
+    print(f"[score] preset {config.preset} on {device}: {len(cells)} runs of {config.steps} steps -> {out}")
+    if args.dry_run:
+        print(json.dumps(info, indent=1))
+        return 0
+    config_path.write_text(json.dumps(info, indent=1))
+    for dataset, variant, seed in cells:
+        marker = out / "cells" / f"{cell_name(dataset, variant, seed)}.json"
+        if marker.exists():
+            if args.verbose:
+                print(f"[score] {marker.stem}: done, skipped")
+            continue
+        run_cell(dataset, variant, seed, config, out, device, verbose=args.verbose)
+        write_reports(out, args.variants, info)
+    write_reports(out, args.variants, info)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,197 @@
+"""``sb3-pola score``: runs, outputs, resume and skip, on a tiny Pendulum dataset (never ../shared)."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from sb3_pola.experiments import score
+
+TINY = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
+TINY += [
+    "--n-critics",
+    "2",
+    "--dynamics-steps",
+    "4",
+    "--dynamics-kwargs",
+    '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}',
+]
+TINY += ["--preset", "cpu", "--device", "cpu", "-v", "0"]
+
+
+@pytest.fixture(scope="module")
+def pendulum_root(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+    """A Minari dataset ``test/pendulum-v0``: 2 random episodes of Pendulum-v1, truncated to 30 steps."""
+    import minari
+    from minari.data_collector import EpisodeBuffer
+
+    root = tmp_path_factory.mktemp("score_data")
+    env = gym.make("Pendulum-v1", max_episode_steps=30)
+    rng = np.random.default_rng(0)
+    buffers = []
+    for ep in range(2):
+        obs, _ = env.reset(seed=ep)
+        observations, actions, rewards = [obs], [], []
+        for _ in range(30):
+            action = rng.uniform(-2, 2, size=1).astype(np.float32)
+            obs, reward, *_ = env.step(action)
+            observations.append(obs)
+            actions.append(action)
+            rewards.append(reward)
+        truncations = np.zeros(30, dtype=bool)
+        truncations[-1] = True
+        buffers.append(
+            EpisodeBuffer(
+                id=ep,
+                observations=np.array(observations),
+                actions=np.array(actions),
+                rewards=np.array(rewards),
+                terminations=np.zeros(30, dtype=bool),
+                truncations=truncations,
+            )
+        )
+    import os
+
+    old = os.environ.get("MINARI_DATASETS_PATH")
+    os.environ["MINARI_DATASETS_PATH"] = str(root)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            minari.create_dataset_from_buffers(
+                dataset_id="test/pendulum-v0", buffer=buffers, env=env, algorithm_name="random", data_format="hdf5"
+            )
+    finally:
+        if old is None:
+            os.environ.pop("MINARI_DATASETS_PATH")
+        else:
+            os.environ["MINARI_DATASETS_PATH"] = old
+    meta_file = root / "test/pendulum-v0" / "data" / "metadata.json"
+    meta = json.loads(meta_file.read_text())
+    meta.update(ref_min_score=-300.0, ref_max_score=0.0)
+    meta_file.write_text(json.dumps(meta))
+    return root
+
+
+def run(root: pathlib.Path, out: pathlib.Path, *extra: str) -> int:
+    return score.main([*TINY, "--data-dir", str(root), "--datasets", "test/pendulum-v0", "--out", str(out), *extra])
+
+
+def test_score_end_to_end_and_skip(pendulum_root: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "out"
+    assert run(pendulum_root, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1") == 0
+    rows = score.read_rows(out / "scores.csv")
+    # 3 variants x 2 seeds x evaluations at steps 3 and 6
+    assert len(rows) == 12
+    assert {(r["variant"], r["seed"], r["step"]) for r in rows} == {
+        (v, s, t) for v in ("T0", "T1", "BC") for s in (0, 1) for t in (3, 6)
+    }
+    assert all(np.isfinite(r["score"]) and r["eval_episodes"] == 1 for r in rows)
+    table = (out / "table.md").read_text()
+    assert "| test/pendulum-v0 | T1 |" in table and "| test/pendulum-v0 | BC |" in table
+    assert (out / "fig_rollout_test_pendulum-v0.png").stat().st_size < 200_000
+    assert not (out / "fig_products_test_pendulum-v0.png").exists()  # needs two product variants
+    assert sorted(p.name for p in (out / "dynamics").iterdir()) == ["test_pendulum-v0__shared.pt"]  # fitted once, shared
+    assert not list((out / "ckpt").iterdir())  # checkpoints of finished runs are removed
+    config = json.loads((out / "config.json").read_text())
+    assert config["steps"] == 6 and config["device"] == "cpu" and config["net_arch"] == [8]
+    # the same command again: every run is skipped, nothing is added
+    capsys.readouterr()
+    assert run(pendulum_root, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1", "-v", "1") == 0
+    assert capsys.readouterr().out.count("done, skipped") == 6
+    assert len(score.read_rows(out / "scores.csv")) == 12
+    # another budget in the same folder is refused
+    assert run(pendulum_root, out, "--variants", "T0", "--seeds", "0", "--steps", "9") == 2
+
+
+def test_score_resumes_an_interrupted_run(
+    pendulum_root: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "out"
+    real_evaluate = score.evaluate
+    calls = []
+
+    def interrupted(*args, **kwargs):  # the second evaluation never happens: the process "dies" at step 6
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(score, "evaluate", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run(pendulum_root, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9")
+    assert [r["step"] for r in score.read_rows(out / "scores.csv")] == [3]
+    assert (out / "ckpt" / "test_pendulum-v0__T3-noproducts__seed0.zip").exists()
+    monkeypatch.setattr(score, "evaluate", real_evaluate)
+    assert run(pendulum_root, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9") == 0
+    rows = score.read_rows(out / "scores.csv")
+    assert [r["step"] for r in rows] == [3, 6, 9]
+    assert rows[2]["wall_s"] >= rows[0]["wall_s"]
+    marker = json.loads((out / "cells" / "test_pendulum-v0__T3-noproducts__seed0.json").read_text())
+    assert marker["steps"] == 9
+
+
+def test_report_from_csv(tmp_path: pathlib.Path) -> None:
+    """Table (final/best, mean ± sample std over seeds, paper column) and both figures from a hand-written CSV."""
+    rows = []
+    for variant, base in [("T0", 10.0), ("T3", 20.0), ("T3-noproducts", 15.0), ("T3-criticproducts", 5.0), ("BC", 8.0)]:
+        for seed in (0, 1):
+            for step, bump in [(100, 0.0), (200, 4.0), (300, 2.0)]:
+                rows.append(
+                    dict(
+                        dataset="halfcheetah/medium-v0",
+                        variant=variant,
+                        seed=seed,
+                        step=step,
+                        score=base + bump + 2 * seed,
+                        score_std=1.0,
+                        mean_return=0.0,
+                        eval_episodes=2,
+                        wall_s=float(step),
+                    )
+                )
+    out = tmp_path / "r"
+    out.mkdir()
+    score.write_rows(out / "scores.csv", rows)
+    assert (
+        score.main(["--report-only", "--out", str(out), "--variants", "T0", "T3", "T3-noproducts", "T3-criticproducts", "BC"])
+        == 0
+    )
+    table = (out / "table.md").read_text()
+    # T3: final = 22, 24 -> 23.0 ± 1.4; best = 24, 26 -> 25.0 ± 1.4; paper's halfcheetah-medium POLA 71.8
+    assert "| halfcheetah/medium-v0 | T3 | 23.0 ± 1.4 | 25.0 ± 1.4 | 0,1 | 300 |" in table
+    assert "71.8 ± 0.4" in table
+    assert table.index("| T0 |") < table.index("| T3 |") < table.index("| BC |")
+    for name in ("fig_rollout_halfcheetah_medium-v0.png", "fig_products_halfcheetah_medium-v0.png"):
+        assert 0 < (out / name).stat().st_size < 200_000
+
+
+@pytest.mark.parametrize(
+    "dataset, task",
+    [
+        ("halfcheetah/medium-v0", ("halfcheetah", "medium")),
+        ("halfcheetah/medium-replay-v0", ("halfcheetah", "medium-replay")),
+        ("mujoco/walker2d/medium-expert-v0", ("walker2d", "medium-expert")),
+        ("hopper-random-v2", ("hopper", "random")),
+        ("halfcheetah/expert-v0", None),
+        ("pendulum/medium-v0", None),
+    ],
+)
+def test_paper_task(dataset: str, task: tuple[str, str] | None) -> None:
+    assert score.paper_task(dataset) == task
+
+
+def test_presets_and_overrides() -> None:
+    args = score.parse_args(["--steps", "50", "--n-critics", "1", "--net-arch", "32", "32"])
+    cpu = score.build_config(args, "cpu")
+    assert (cpu.preset, cpu.steps, cpu.n_critics, cpu.top_k, cpu.net_arch) == ("cpu", 50, 1, 1, [32, 32])
+    assert cpu.eval_freq == score.PRESETS["cpu"].eval_freq
+    paper = score.build_config(score.parse_args([]), "cuda")
+    assert (paper.preset, paper.n_critics, paper.net_arch, paper.batch_size) == ("paper", 10, [256, 256, 256], 256)
+    assert cpu.signature() != score.build_config(score.parse_args(["--steps", "51"]), "cpu").signature()
+    with pytest.raises(SystemExit):
+        score.parse_args(["--variants", "T7"])
