@@ -274,12 +274,14 @@ class EnsembleDynamics(nn.Module):
         epochs without such an improvement of any member (or at ``max_epochs`` / ``max_steps``). Each member
         ends with its best weights; the ``n_elites`` best holdout members become the elites.
         All randomness comes from torch's global RNG: ``th.manual_seed`` makes a fit reproducible.
+        ``fit`` makes the parameters trainable again (undoes :meth:`freeze`) and leaves the model in eval mode.
 
         :param observations: ``[N, obs_dim]``
         :param actions: ``[N, action_dim]``
         :param next_observations: ``[N, obs_dim]`` (the episode's own next observations)
         :param rewards: ``[N]``
-        :param dones: ``[N]`` termination flags (needed with ``learn_termination``, ignored otherwise)
+        :param dones: ``[N]`` termination flags, true terminations only, not time-limit truncations
+            (needed with ``learn_termination``, ignored otherwise)
         :param batch_size: minibatch size per member
         :param learning_rate: Adam learning rate
         :param holdout_ratio: fraction of the data held out for early stopping
