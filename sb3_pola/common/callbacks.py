@@ -43,6 +43,11 @@ class NormalizedScoreEvalCallback(EvalCallback):
         score_fn = getattr(self.model, "normalized_score", None)
         return None if score_fn is None else score_fn(returns)
 
+    def _episode_scores(self) -> list[float] | None:
+        """Normalised score of each episode of the current evaluation, or None without reference scores."""
+        scores = [self._normalize(r) for r in self._episode_returns]
+        return None if not scores or any(s is None for s in scores) else [float(s) for s in scores]  # type: ignore[arg-type]
+
     def _log_success_callback(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
         super()._log_success_callback(locals_, globals_)
         if not locals_["done"]:
@@ -56,8 +61,8 @@ class NormalizedScoreEvalCallback(EvalCallback):
             episode_return = float(locals_["current_rewards"][locals_["i"]])
         self._episode_returns.append(episode_return)
         # recorded after every episode: the value standing at the dump covers all episodes of this evaluation
-        scores = [self._normalize(r) for r in self._episode_returns]
-        if scores[0] is not None:
+        scores = self._episode_scores()
+        if scores is not None:
             self.logger.record("eval/normalized_score", float(np.mean(scores)))  # mean of scores = score of the mean
             self.logger.record("eval/normalized_score_std", float(np.std(scores)))
 
@@ -66,21 +71,20 @@ class NormalizedScoreEvalCallback(EvalCallback):
         if evaluating:
             self._episode_returns = []
         continue_training = super()._on_step()
-        if evaluating and self._episode_returns:
-            scores = [self._normalize(r) for r in self._episode_returns]
-            if scores[0] is not None:
-                self.last_normalized_score = float(np.mean(scores))  # type: ignore[arg-type]
-                self.evaluations_normalized.append([float(s) for s in scores])  # type: ignore[arg-type]
-                if self.verbose >= 1:
-                    print(f"Normalized score: {self.last_normalized_score:.2f} +/- {np.std(scores):.2f}")  # type: ignore[arg-type]
-                self._save_normalized()
+        scores = self._episode_scores() if evaluating else None
+        if scores is not None:
+            self.last_normalized_score = float(np.mean(scores))
+            self.evaluations_normalized.append(scores)
+            if self.verbose >= 1:
+                print(f"Normalized score: {self.last_normalized_score:.2f} +/- {np.std(scores):.2f}")
+            self._save_normalized()
         return continue_training
 
     def _save_normalized(self) -> None:
         """Rewrite ``evaluations.npz`` with the normalised scores next to EvalCallback's arrays."""
         if self.log_path is None or len(self.evaluations_normalized) != len(self.evaluations_results):
             return
-        extra = {"successes": self.evaluations_successes} if len(self.evaluations_successes) > 0 else {}
+        extra: dict[str, Any] = {"successes": self.evaluations_successes} if len(self.evaluations_successes) > 0 else {}
         np.savez(
             self.log_path,
             timesteps=self.evaluations_timesteps,
