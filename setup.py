@@ -30,7 +30,7 @@ setup(
         "rich",
     ],
     extras_require={
-        "zoo": ["rl_zoo3>=2.9", "requests", "tensorboard", "optuna"],
+        "zoo": ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"],
         "tests": ["pytest", "pytest-xdist", "pytest-timeout"],
         "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
     },
