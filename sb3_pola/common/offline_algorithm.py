@@ -149,6 +149,14 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_offline_data"]
 
+    def save_replay_buffer(self, path: Any) -> None:
+        """Nothing to save: the replay buffer is the dataset, found again through ``self.dataset``."""
+        warnings.warn("save_replay_buffer: an offline algorithm's buffer is its dataset; nothing was saved.")
+
+    def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
+        """Offline algorithms read their buffer from the dataset (see ``save_replay_buffer``)."""
+        raise NotImplementedError("An offline algorithm's replay buffer is its dataset: pass `dataset=` instead.")
+
     def _setup_offline_data(self) -> OfflineReplayBuffer:
         """The replay buffer over the dataset, loaded now if the model was built without one (e.g. after ``load``)."""
         if self.replay_buffer is None:
