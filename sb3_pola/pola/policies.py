@@ -13,6 +13,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 from torch.nn import functional as F
 
+from sb3_pola.common.activations import fused_activation
 from sb3_pola.common.diffusion import NoiseSchedule
 from sb3_pola.common.torch_layers import SinusoidalPosEmb, StateProductsExtractor, vectorized_mlp
 
@@ -61,6 +62,19 @@ class DiffusionActor(nn.Module):
         layers.append(nn.Linear(net_arch[-1], action_dim))
         self.trunk = nn.Sequential(*layers)
         self.register_buffer("step_indices", th.arange(n_diffusion_steps), persistent=False)
+        # reverse-step coefficients as Python floats: no tensor indexing in the chain
+        sched = self.schedule
+        self._step_coefs = [
+            (
+                float(sched.sqrt_recip_alphas_cumprod[t]),
+                float(sched.sqrt_recipm1_alphas_cumprod[t]),
+                float(sched.posterior_mean_coef1[t]),
+                float(sched.posterior_mean_coef2[t]),
+                float(sched.noise_std[t]) if t > 0 else 0.0,
+            )
+            for t in range(n_diffusion_steps)
+        ]
+        self._time_proj_cache: tuple[tuple[int, ...], th.Tensor] | None = None
 
     @property
     def n_diffusion_steps(self) -> int:
@@ -78,6 +92,23 @@ class DiffusionActor(nn.Module):
         x_t = self.schedule.add_noise(actions, noise, t)
         return F.mse_loss(self.predict_noise(x_t, t, features), noise)
 
+    def _time_projection(self) -> th.Tensor:
+        """``[n, H]`` projection of every step's time embedding by the first layer.
+
+        Without autograd it is cached, keyed on the version counters of the weights it depends on
+        (optimizer steps and EMA updates are in place and bump them), so inference skips the time MLP.
+        """
+        t_dim, a_dim = self.time_embedding_dim, self.action_dim
+        if th.is_grad_enabled() and self.input_layer.weight.requires_grad:
+            return F.linear(self.time_mlp(self.step_indices), self.input_layer.weight[:, a_dim : a_dim + t_dim])
+        params = [*self.time_mlp.parameters(), self.input_layer.weight]
+        key = tuple(v for p in params for v in (id(p), p._version, p.data_ptr()))
+        if self._time_proj_cache is None or self._time_proj_cache[0] != key:
+            with th.no_grad():
+                proj = F.linear(self.time_mlp(self.step_indices), self.input_layer.weight[:, a_dim : a_dim + t_dim])
+            self._time_proj_cache = (key, proj)
+        return self._time_proj_cache[1]
+
     def sample(self, features: th.Tensor, generator: th.Generator | None = None) -> th.Tensor:
         """Draw actions with the reverse chain (eq. 5), differentiable w.r.t. the parameters and ``features``.
 
@@ -88,17 +119,22 @@ class DiffusionActor(nn.Module):
         batch_size = features.shape[0]
         a_dim, t_dim = self.action_dim, self.time_embedding_dim
         weight = self.input_layer.weight  # [H, A + time + F]
-        # constant over the chain: state and time projections, computed once
+        # constant over the chain: state and time projections, computed once, summed per step up front
         state_proj = F.linear(features, weight[:, a_dim + t_dim :], self.input_layer.bias)  # [B, H]
-        time_proj = F.linear(self.time_mlp(self.step_indices), weight[:, a_dim : a_dim + t_dim])  # [n, H]
-        w_action = weight[:, :a_dim]  # [H, A]
+        step_bias = state_proj.unsqueeze(0) + self._time_projection().unsqueeze(1)  # [n, B, H]
+        w_action_t = weight[:, :a_dim].t()  # [A, H]
         noise = th.randn(
             (self.n_diffusion_steps + 1, batch_size, a_dim), device=features.device, dtype=features.dtype, generator=generator
         )
         x = noise[-1]  # a_T ~ N(0, I)
         for t in reversed(range(self.n_diffusion_steps)):
-            eps = self.trunk(F.linear(x, w_action) + time_proj[t] + state_proj)
-            x = self.schedule.step(eps, t, x, noise[t])
+            eps = self.trunk(th.addmm(step_bias[t], x, w_action_t))
+            # NoiseSchedule.step with float coefficients: x0 = clip(x / sqrt(abar) - sqrt(1/abar - 1) eps),
+            # x_{t-1} = c1 x0 + c2 x + sigma_t z (no noise at t = 0)
+            recip, recipm1, coef1, coef2, sigma = self._step_coefs[t]
+            x0 = (x * recip - eps * recipm1).clamp_(-1.0, 1.0)
+            x_new = th.add(x0 * coef1, x, alpha=coef2)
+            x = x_new.add_(noise[t], alpha=sigma) if t > 0 else x_new
         return x.clamp(-1.0, 1.0)
 
 
@@ -155,6 +191,8 @@ class POLAPolicy(BasePolicy):
     :param n_action_samples: candidate actions per state in ``predict``
     :param predict_seed: seed of the noise used by deterministic ``predict``
     :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`; ``None`` builds no model
+    :param compile_activations: run Mish through a kernel fused by ``torch.compile``
+        (:mod:`sb3_pola.common.activations`; same function, float rounding aside, eager fallback)
     :param optimizer_class: optimizer of actor and critic
     :param optimizer_kwargs: extra optimizer arguments
     """
@@ -180,6 +218,7 @@ class POLAPolicy(BasePolicy):
         n_action_samples: int = 1,
         predict_seed: int = 0,
         dynamics_kwargs: dict[str, Any] | None = None,
+        compile_activations: bool = False,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
     ) -> None:
@@ -216,6 +255,8 @@ class POLAPolicy(BasePolicy):
         self.n_action_samples = n_action_samples
         self.predict_seed = predict_seed
         self.dynamics_kwargs = dynamics_kwargs
+        self.compile_activations = compile_activations
+        net_activation = fused_activation(activation_fn) if compile_activations else activation_fn
         action_dim = int(np.prod(action_space.shape))
         obs_dim = int(np.prod(observation_space.shape))
 
@@ -227,11 +268,11 @@ class POLAPolicy(BasePolicy):
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             time_embedding_dim=time_embedding_dim,
-            activation_fn=activation_fn,
+            activation_fn=net_activation,
         )
         self.actor_ema = copy.deepcopy(self.actor).requires_grad_(False)
         critic_features = StateProductsExtractor(observation_space, use_state_products=critic_state_products)
-        self.critic = EnsembleCritic(critic_features, action_dim, critic_arch, n_critics, activation_fn)
+        self.critic = EnsembleCritic(critic_features, action_dim, critic_arch, n_critics, net_activation)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
         self.critic_target.train(False)
         self.actor_ema.train(False)
@@ -261,6 +302,7 @@ class POLAPolicy(BasePolicy):
             n_action_samples=self.n_action_samples,
             predict_seed=self.predict_seed,
             dynamics_kwargs=self.dynamics_kwargs,
+            compile_activations=self.compile_activations,
             lr_schedule=self._dummy_schedule,
             optimizer_class=self.optimizer_class,
             optimizer_kwargs=self.optimizer_kwargs,

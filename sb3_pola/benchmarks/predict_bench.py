@@ -1,0 +1,113 @@
+"""Predict benchmark: single-observation latency of POLA next to SB3 SAC, batched throughput and its roofline.
+
+``python -m sb3_pola.benchmarks.predict_bench [--quick]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+
+from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_roofline, median_time, synthetic_dataset
+
+
+class _SpacesEnv(gym.Env):
+    """An env that only carries spaces (SAC needs one to be built)."""
+
+    def __init__(self, observation_space: gym.spaces.Box, action_space: gym.spaces.Box) -> None:
+        self.observation_space = observation_space
+        self.action_space = action_space
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        return self.observation_space.sample(), {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        return self.observation_space.sample(), 0.0, False, False, {}
+
+
+def latency(predict: Any, obs: np.ndarray, n_calls: int) -> dict[str, float]:
+    """Median and p99 latency of ``predict(obs)`` over ``n_calls`` calls (after 20 warm-up calls), in seconds."""
+    for _ in range(20):
+        predict(obs)
+    times = np.empty(n_calls)
+    for i in range(n_calls):
+        start = time.perf_counter()
+        predict(obs)
+        times[i] = time.perf_counter() - start
+    return {"median_s": float(np.median(times)), "p99_s": float(np.quantile(times, 0.99))}
+
+
+def run(
+    quick: bool = False,
+    device: str = "cpu",
+    task: str = "hopper",
+    batch: int = 1024,
+    policy_kwargs: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Single-observation latency (POLA vs SAC, same observation space, same run) and batched predict throughput."""
+    from stable_baselines3 import SAC
+
+    obs_dim, act_dim, env_id = TASK_SIZES[task]
+    data = synthetic_dataset(10_000, obs_dim, act_dim, env_id)
+    model = make_pola(data, device=device, policy_kwargs=policy_kwargs or {})
+    sac = SAC("MlpPolicy", _SpacesEnv(data.observation_space, data.action_space), device=device, seed=0)
+    obs = data.observations[0]
+    n_calls = 300 if quick else 1000
+    pola_lat = latency(lambda o: model.predict(o, deterministic=True), obs, n_calls)
+    sac_lat = latency(lambda o: sac.predict(o, deterministic=True), obs, n_calls)
+    ratio = pola_lat["median_s"] / sac_lat["median_s"]
+
+    # batched: the policy's forward on a device tensor (no numpy round trip), as an evaluation over many envs would
+    obs_batch = th.as_tensor(data.observations[:batch], device=device)
+    policy = model.policy
+
+    def batched() -> th.Tensor:
+        with th.no_grad():
+            return policy._predict(obs_batch, deterministic=True)
+
+    batch_s = median_time(batched, reps=5 if quick else 20, device=device, warmup=2)
+    flops, calls = count_flops(batched)
+    roof = matmul_roofline(calls, device, reps=3 if quick else 5)
+    achieved = flops / batch_s
+    return {
+        "task": task,
+        "obs_dim": obs_dim,
+        "single": {
+            "pola_median_s": pola_lat["median_s"],
+            "pola_p99_s": pola_lat["p99_s"],
+            "sac_median_s": sac_lat["median_s"],
+            "sac_p99_s": sac_lat["p99_s"],
+            "n_calls": n_calls,
+            "ratio": ratio,
+            "target": "<= 2x SAC",
+            "met": ratio <= 2.0,
+        },
+        "batched": {
+            "batch": batch,
+            "seconds": batch_s,
+            "obs_per_s": batch / batch_s,
+            "flops": flops,
+            "achieved_flops_per_s": achieved,
+            "matmul_flops_per_s": roof["flops_per_s"],
+            "roofline_fraction": achieved / roof["flops_per_s"],
+        },
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--device", default="cpu")
+    args = parser.parse_args(argv)
+    print(json.dumps(run(args.quick, args.device), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
