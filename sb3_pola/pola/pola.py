@@ -8,7 +8,6 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import polyak_update
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
@@ -17,6 +16,12 @@ from sb3_pola.common.termination import TerminationFn, get_termination_fn
 from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy
 
 SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
+
+
+def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
+    """Polyak update ``target <- (1 - tau) target + tau param`` of all tensors in one ``_foreach_lerp_`` call."""
+    with th.no_grad():
+        th._foreach_lerp_(list(target_params), list(params), tau)
 
 
 def lookahead_q_objective(
@@ -276,8 +281,8 @@ class POLA(OfflineAlgorithm):
         step = self._n_updates + 1
         if step % self.ema_update_freq == 0:
             decay = self.ema_decay if step >= self.ema_start else 0.0
-            polyak_update(self.actor.parameters(), policy.actor_ema.parameters(), 1.0 - decay)
-        polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
+            _lerp_params(self.actor.parameters(), policy.actor_ema.parameters(), 1.0 - decay)
+        _lerp_params(self.critic.parameters(), self.critic_target.parameters(), self.tau)
 
         stats.update(
             critic_loss=critic_loss.detach(),
