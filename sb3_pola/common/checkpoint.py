@@ -365,6 +365,22 @@ def learn_with_checkpoints(
 # --------------------------------------------------------------------------- validating a model file
 
 
+def _ends_with_zip_directory(path: pathlib.Path, size: int) -> bool:
+    """Whether the file ends with a zip end-of-central-directory record (and its comment), as a complete zip does."""
+    tail_size = min(size, 22 + 65535)
+    with open(path, "rb") as file:
+        file.seek(size - tail_size)
+        tail = file.read(tail_size)
+    position = tail.rfind(b"PK\x05\x06")
+    while position >= 0:
+        if position + 22 <= len(tail):
+            comment_length = int.from_bytes(tail[position + 20 : position + 22], "little")
+            if position + 22 + comment_length == len(tail):
+                return True
+        position = tail.rfind(b"PK\x05\x06", 0, position)
+    return False
+
+
 def validate_model_file(path: str | os.PathLike, policy_classes: tuple[type, ...] = (), algorithm_name: str = "") -> dict:
     """Check that ``path`` is a complete SB3 model file of the expected kind, before ``load`` touches it.
 
@@ -383,6 +399,12 @@ def validate_model_file(path: str | os.PathLike, policy_classes: tuple[type, ...
     if found is None:
         raise FileNotFoundError(f"No model file at {' or '.join(map(str, candidates))}")
     what = f"{algorithm_name} model file" if algorithm_name else "model file"
+    size = found.stat().st_size
+    if not _ends_with_zip_directory(found, size):
+        # checked first: a truncated model file can still open as a zip, found inside it (policy.pth is itself a zip)
+        raise ModelFileError(
+            f"{found} is not a valid {what}: truncated or corrupt zip ({size} bytes; no zip directory at its end)"
+        )
     try:
         with zipfile.ZipFile(found) as archive:
             names = archive.namelist()
@@ -397,7 +419,6 @@ def validate_model_file(path: str | os.PathLike, policy_classes: tuple[type, ...
                 raise ModelFileError(f"{found} is corrupt: member {bad_member!r} fails its CRC check")
             raw = archive.read("data").decode()
     except zipfile.BadZipFile as error:
-        size = found.stat().st_size
         raise ModelFileError(f"{found} is not a valid {what}: truncated or corrupt zip ({size} bytes; {error})") from error
     except (EOFError, OSError) as error:  # OSError covers zlib errors of damaged members
         raise ModelFileError(f"{found} is not a valid {what}: unreadable ({error})") from error

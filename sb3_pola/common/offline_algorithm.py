@@ -272,24 +272,27 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         :param parameters_only: check the parameters (and buffers) only, not the accumulated losses
         :param action: what is done instead, for the message
         """
-        named: list[tuple[str, th.Tensor]] = []
+        named: list[tuple[str, str, th.Tensor]] = []
         if not parameters_only:
             # POLA accumulates its per-step statistics (losses, Q-values, gradient norms) in _stat_sums
-            named += [(f"loss {key!r}", value) for key, value in getattr(self, "_stat_sums", {}).items()]
+            named += [("losses", key, value) for key, value in getattr(self, "_stat_sums", {}).items()]
         policy = getattr(self, "policy", None)
         if policy is not None:
-            named += [(f"parameter {key!r}", value) for key, value in policy.state_dict().items() if value.is_floating_point()]
+            named += [("parameters", key, value) for key, value in policy.state_dict().items() if value.is_floating_point()]
         if not named:
             return
-        finite = th.stack([th.isfinite(value).all() for _, value in named]).cpu().tolist()
+        finite = th.stack([th.isfinite(value).all() for *_, value in named]).cpu().tolist()
         if all(finite):
             if not parameters_only:
                 self._last_finite_step = self.num_timesteps
             return
-        bad = [name for (name, _), ok in zip(named, finite, strict=True) if not ok]
-        shown = ", ".join(bad[:6]) + (f" and {len(bad) - 6} more" if len(bad) > 6 else "")
+        parts = []
+        for kind in ("losses", "parameters"):
+            bad = [name for (k, name, _), ok in zip(named, finite, strict=True) if k == kind and not ok]
+            if bad:
+                parts.append(f"{kind} " + ", ".join(bad[:4]) + (f" (+{len(bad) - 4} more)" if len(bad) > 4 else ""))
         raise DivergenceError(
-            f"Training diverged: NaN or inf in {shown} at gradient step {self.num_timesteps} (first non-finite "
+            f"Training diverged: NaN or inf in {'; '.join(parts)} at gradient step {self.num_timesteps} (first non-finite "
             f"after step {self._last_finite_step}, when all were last found finite). {action}. Try a lower learning "
             "rate or max_grad_norm, and check the dataset for NaN/inf; set check_finite_freq=1 to find the exact step."
         )

@@ -1,0 +1,419 @@
+"""Reliability harness: a resumable training worker, a kill-and-resume soak loop, and a peak-memory probe.
+
+Not run in CI (``tests/test_reliability.py`` runs short versions). Commands::
+
+    # hours of training with periodic checkpoints, SIGKILLed at random moments (some mid-write) and
+    # resumed, each finished run compared bit for bit with one uninterrupted run:
+    python -m sb3_pola.benchmarks.soak soak --minutes 120 --total 20000 --save-freq 500 --out soak_report.json
+
+    # peak resident memory when training on a 2M-transition (HalfCheetah medium-expert sized) dataset:
+    python -m sb3_pola.benchmarks.soak memory --n 2000000 --obs-dim 17 --act-dim 6 --steps 200
+
+    # one training process (what the soak loop starts and kills):
+    python -m sb3_pola.benchmarks.soak worker --dataset ID --dir runs/x --total 5000 --save-freq 100
+
+Without ``--dataset`` the soak loop writes a small synthetic Minari dataset in a temp folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import random
+import resource
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any
+
+# A configuration that trains fast on a CPU and still uses every part of POLA (dynamics model, look-ahead, EMA).
+LIGHT_CONFIG: dict[str, Any] = dict(
+    n_critics=2,
+    batch_size=64,
+    policy_kwargs=dict(net_arch=[32, 32]),
+    dynamics_kwargs=dict(n_members=2, n_elites=1, hidden_dim=32, n_layers=2),
+    dynamics_fit_kwargs=dict(max_epochs=1),
+    rollout_length=1,
+    ema_start=20,
+    ema_update_freq=2,
+)
+
+
+def make_light_model(dataset: Any, seed: int = 0, **overrides: Any) -> Any:
+    """POLA with :data:`LIGHT_CONFIG` on CPU and a decaying learning rate (a resume with a wrong schedule would show).
+
+    :param dataset: what ``POLA(dataset=...)`` takes
+    :param seed: random seed
+    :param overrides: replace entries of :data:`LIGHT_CONFIG`
+    """
+    from sb3_pola.pola.pola import POLA
+
+    config = {**LIGHT_CONFIG, **overrides}
+    return POLA(
+        "MlpPolicy", dataset=dataset, seed=seed, device="cpu", learning_rate=lambda p: 1e-3 * (0.1 + 0.9 * p), **config
+    )
+
+
+def run_worker(args: argparse.Namespace) -> int:
+    """Train to ``--total`` steps, resuming from ``--dir`` if a checkpoint is there; save ``--final`` at the end."""
+    import torch as th
+
+    from sb3_pola.common import checkpoint
+    from sb3_pola.pola.pola import POLA
+
+    th.set_num_threads(1)
+    if args.write_delay > 0:
+        marker = pathlib.Path(args.write_marker)
+
+        def slow_write(tmp: pathlib.Path) -> None:
+            marker.write_text(str(tmp))  # the parent kills us now: the temp file exists, the rename has not happened
+            time.sleep(args.write_delay)
+
+        checkpoint.before_replace_hook = slow_write
+    model = checkpoint.learn_with_checkpoints(
+        lambda: make_light_model(args.dataset, args.seed),
+        total_timesteps=args.total,
+        save_path=args.dir,
+        save_freq=args.save_freq,
+        algorithm_class=POLA,
+        load_kwargs=dict(dataset=args.dataset, device="cpu"),
+        log_interval=0,
+    )
+    checkpoint.before_replace_hook = None
+    if args.final:
+        checkpoint.save_checkpoint(model, args.final)
+    return 0
+
+
+def worker_command(
+    dataset: str,
+    directory: str | os.PathLike,
+    total: int,
+    save_freq: int,
+    seed: int = 0,
+    final: str | os.PathLike | None = None,
+) -> list[str]:
+    """The command line of one worker process."""
+    command = [sys.executable, "-m", "sb3_pola.benchmarks.soak", "worker", "--dataset", dataset, "--dir", str(directory)]
+    command += ["--total", str(total), "--save-freq", str(save_freq), "--seed", str(seed)]
+    if final is not None:
+        command += ["--final", str(final)]
+    return command
+
+
+def compare_checkpoints(path_a: str | os.PathLike, path_b: str | os.PathLike) -> list[str]:
+    """Differences between two checkpoints: every tensor of the policy and optimizers, the step counters, the RNG states.
+
+    :return: names of what differs (empty: bit-identical)
+    """
+    import torch as th
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    from sb3_pola.common.checkpoint import read_rng_state
+
+    data_a, params_a, _ = load_from_zip_file(pathlib.Path(path_a), device="cpu")
+    data_b, params_b, _ = load_from_zip_file(pathlib.Path(path_b), device="cpu")
+    assert data_a is not None and data_b is not None
+    diffs = [key for key in ("num_timesteps", "_n_updates", "_total_timesteps") if data_a.get(key) != data_b.get(key)]
+
+    def walk(a: Any, b: Any, name: str) -> None:
+        if isinstance(a, dict) and isinstance(b, dict):
+            if a.keys() != b.keys():
+                diffs.append(f"{name} (keys)")
+            for key in a.keys() & b.keys():
+                walk(a[key], b[key], f"{name}.{key}")
+        elif isinstance(a, list | tuple) and isinstance(b, list | tuple):
+            if len(a) != len(b):
+                diffs.append(f"{name} (length)")
+            for i, (x, y) in enumerate(zip(a, b, strict=False)):
+                walk(x, y, f"{name}[{i}]")
+        elif isinstance(a, th.Tensor) and isinstance(b, th.Tensor):
+            if a.dtype != b.dtype or a.shape != b.shape or not th.equal(a, b):
+                diffs.append(name)
+        elif a != b:
+            diffs.append(name)
+
+    walk(params_a, params_b, "params")
+    walk(read_rng_state(path_a), read_rng_state(path_b), "rng")
+    return diffs
+
+
+def checkpoint_step(path: pathlib.Path) -> int | None:
+    """The step of a valid checkpoint, ``None`` if there is none; raises if the file is broken."""
+    from sb3_pola.common.checkpoint import validate_model_file
+
+    if not path.is_file():
+        return None
+    return int(validate_model_file(path)["num_timesteps"])
+
+
+def make_synthetic_minari(root: pathlib.Path, dataset_id: str = "soak/synthetic-v0", n_episodes: int = 20) -> str:
+    """Write a small random Minari dataset (4-d observations, 2-d actions, no env) under ``root``."""
+    import warnings
+
+    import gymnasium as gym
+    import minari
+    import numpy as np
+    from minari.data_collector import EpisodeBuffer
+
+    rng = np.random.default_rng(0)
+    buffers = []
+    for episode in range(n_episodes):
+        length = 50
+        obs = np.cumsum(rng.normal(size=(length + 1, 4)), axis=0) * 0.1
+        terminations = np.zeros(length, dtype=bool)
+        truncations = np.zeros(length, dtype=bool)
+        truncations[-1] = True
+        buffers.append(
+            EpisodeBuffer(
+                id=episode,
+                observations=obs,
+                actions=rng.uniform(-1, 1, size=(length, 2)).astype(np.float32),
+                rewards=rng.normal(size=length),
+                terminations=terminations,
+                truncations=truncations,
+            )
+        )
+    os.environ["MINARI_DATASETS_PATH"] = str(root)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        minari.create_dataset_from_buffers(
+            dataset_id=dataset_id,
+            buffer=buffers,
+            observation_space=gym.spaces.Box(-np.inf, np.inf, (4,), np.float64),
+            action_space=gym.spaces.Box(-1.0, 1.0, (2,), np.float32),
+            algorithm_name="soak",
+            data_format="hdf5",
+        )
+    return dataset_id
+
+
+def run_soak(args: argparse.Namespace) -> int:
+    """Train, kill at random moments (a share of them inside a checkpoint write), resume, repeat; check nothing is lost."""
+    work = pathlib.Path(args.workdir or tempfile.mkdtemp(prefix="sb3_pola_soak_"))
+    work.mkdir(parents=True, exist_ok=True)
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "SB3_POLA_CACHE_DIR": str(work / "cache")}
+    dataset = args.dataset
+    if dataset is None:
+        dataset = make_synthetic_minari(work / "datasets")
+        env["MINARI_DATASETS_PATH"] = str(work / "datasets")
+    rng = random.Random(args.seed)
+    deadline = time.monotonic() + 60 * args.minutes
+
+    start = time.monotonic()
+    reference = work / "reference.zip"
+    subprocess.run(
+        worker_command(dataset, work / "reference_run", args.total, args.save_freq, 0, reference), env=env, check=True
+    )
+    reference_time = time.monotonic() - start
+    print(f"uninterrupted reference run: {args.total} steps in {reference_time:.1f} s", flush=True)
+
+    report: dict[str, Any] = dict(
+        total_steps_per_run=args.total,
+        save_freq=args.save_freq,
+        reference_seconds=round(reference_time, 1),
+        runs_completed=0,
+        runs_identical=0,
+        kills=0,
+        kills_during_checkpoint_write=0,
+        resumes=0,
+        broken_latest_files=0,
+        checkpoint_step_regressions=0,
+        steps_lost=0,
+        max_steps_redone_after_kill=0,
+        stale_temp_files_left_by_kills=0,
+        mismatches=[],
+    )
+    run_index = 0
+    while time.monotonic() < deadline:
+        run_dir = work / f"run_{run_index}"
+        final = work / f"final_{run_index}.zip"
+        latest = run_dir / "pola_latest.zip"
+        last_step = 0
+        attempts = 0
+        while time.monotonic() < deadline:
+            attempts += 1
+            if latest.is_file():
+                report["resumes"] += 1
+            during_write = rng.random() < args.write_kill_share
+            command = worker_command(dataset, run_dir, args.total, args.save_freq, 0, final)
+            marker = work / "writing"
+            marker.unlink(missing_ok=True)
+            if during_write:
+                command += ["--write-delay", "5", "--write-marker", str(marker)]
+            log = work / "worker.log"
+            with open(log, "wb") as log_file:  # a file, not a pipe: a chatty worker must never block on it
+                process = subprocess.Popen(command, env=env, stdout=log_file, stderr=subprocess.STDOUT)
+            if during_write:
+                # wait for a checkpoint write to reach its slow point, then kill inside it
+                waited = 0.0
+                while process.poll() is None and not marker.exists() and waited < reference_time + 60:
+                    time.sleep(0.05)
+                    waited += 0.05
+            else:
+                time.sleep(rng.uniform(0.2, args.max_kill_after or (reference_time + 5.0)))
+            if process.poll() is None:
+                process.send_signal(signal.SIGKILL)
+                process.wait()
+                report["kills"] += 1
+                report["kills_during_checkpoint_write"] += int(during_write and marker.exists())
+                report["stale_temp_files_left_by_kills"] += len(list(run_dir.glob(".*.tmp.zip")))
+                try:
+                    step = checkpoint_step(latest) or 0
+                except Exception as error:  # a broken latest file is exactly what must never happen
+                    report["broken_latest_files"] += 1
+                    print(f"BROKEN latest checkpoint after a kill: {error}", flush=True)
+                    latest.unlink()
+                    step = 0
+                if step < last_step:
+                    report["checkpoint_step_regressions"] += 1
+                last_step = max(last_step, step)
+                continue
+            stderr = log.read_text(errors="replace")
+            if process.returncode != 0:
+                print(f"worker failed (rc {process.returncode}):\n{stderr[-3000:]}", flush=True)
+                report["mismatches"].append(f"run {run_index}: worker exited with {process.returncode}")
+                break
+            report["runs_completed"] += 1
+            diffs = compare_checkpoints(reference, final)
+            if diffs:
+                report["mismatches"].append(f"run {run_index}: {diffs[:10]}")
+                report["steps_lost"] += args.total  # a run that differs counts as entirely lost
+            else:
+                report["runs_identical"] += 1
+            final_step = checkpoint_step(final) or 0
+            report["steps_lost"] += max(0, args.total - final_step)
+            print(
+                f"run {run_index}: finished after {attempts} starts, identical to the reference: {not diffs} "
+                f"(kills so far {report['kills']}, {report['kills_during_checkpoint_write']} mid-write)",
+                flush=True,
+            )
+            break
+        run_index += 1
+    report["max_steps_redone_after_kill"] = args.save_freq  # resume starts at the last checkpoint: < save_freq steps redone
+    report["workdir"] = str(work)
+    text = json.dumps(report, indent=2)
+    print(text)
+    if args.out:
+        pathlib.Path(args.out).write_text(text)
+    ok = not report["mismatches"] and not report["broken_latest_files"] and not report["checkpoint_step_regressions"]
+    return 0 if ok else 1
+
+
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as file:
+        return int(file.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def _peak_bytes() -> int:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux reports KiB
+
+
+def run_memory(args: argparse.Namespace) -> int:
+    """Peak resident memory of training on a synthetic dataset of ``--n`` transitions, by phase."""
+    import gymnasium as gym
+    import numpy as np
+    import torch as th
+
+    from sb3_pola.common.datasets import OfflineDataset
+    from sb3_pola.pola.pola import POLA
+
+    th.set_num_threads(1)
+    n, obs_dim, act_dim = args.n, args.obs_dim, args.act_dim
+
+    def synthetic(n: int) -> OfflineDataset:
+        rng = np.random.default_rng(0)
+        observations = rng.standard_normal((n, obs_dim), dtype=np.float32)
+        next_observations = rng.standard_normal((n, obs_dim), dtype=np.float32)
+        next_observations *= 0.1
+        next_observations += observations
+        return OfflineDataset(
+            observations=observations,
+            actions=rng.random((n, act_dim), dtype=np.float32) * 2.0 - 1.0,
+            rewards=rng.standard_normal(n, dtype=np.float32),
+            next_observations=next_observations,
+            dones=(rng.random(n, dtype=np.float32) < 1e-3).astype(np.float32),
+            observation_space=gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32),
+            action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32),
+            dataset_id="synthetic",
+        )
+
+    config = dict(LIGHT_CONFIG, rollout_length=args.rollout_length)
+    if args.full_size:
+        config = dict(rollout_length=args.rollout_length, dynamics_fit_kwargs=dict(max_epochs=1))
+    # warm-up on 1,000 transitions: imports, allocator pools and lazily built modules are not the dataset's cost
+    POLA("MlpPolicy", dataset=synthetic(1000), seed=0, device="cpu", **config).learn(2, log_interval=0)
+    baseline = _rss_bytes()
+    data = synthetic(n)
+    phases = {"dataset": _peak_bytes()}
+    model = POLA("MlpPolicy", dataset=data, seed=0, device="cpu", **config)
+    phases["model"] = _peak_bytes()
+    model._setup_learn(args.steps)
+    phases["replay_buffer"] = _peak_bytes()
+    model._before_training()
+    phases["dynamics_fit"] = _peak_bytes()
+    model.learn(args.steps, log_interval=0)
+    phases["training"] = _peak_bytes()
+    n_params = sum(p.numel() for p in model.policy.parameters())
+    network_bytes = 4 * n_params * 3  # weights, gradients and two Adam moments of the trained part, roughly
+    dataset_bytes = data.nbytes
+    budget = 1.5 * dataset_bytes + network_bytes
+    report = {
+        "transitions": n,
+        "dataset_float32_bytes": dataset_bytes,
+        "network_parameters": n_params,
+        "network_bytes_estimate": network_bytes,
+        "baseline_rss_bytes_after_warmup": baseline,
+        "peak_rss_bytes_by_phase": phases,
+        "peak_above_baseline_bytes": {k: v - baseline for k, v in phases.items()},
+        "budget_bytes_1.5x_dataset_plus_networks": int(budget),
+        "ratio_peak_above_baseline_to_dataset": {k: round((v - baseline) / dataset_bytes, 3) for k, v in phases.items()},
+        "within_budget": {k: v - baseline <= budget for k, v in phases.items()},
+    }
+    text = json.dumps(report, indent=2)
+    print(text)
+    if args.out:
+        pathlib.Path(args.out).write_text(text)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m sb3_pola.benchmarks.soak", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    worker = sub.add_parser("worker", help="train to --total steps, resuming from --dir")
+    worker.add_argument("--dataset", required=True)
+    worker.add_argument("--dir", required=True)
+    worker.add_argument("--total", type=int, required=True)
+    worker.add_argument("--save-freq", type=int, default=100)
+    worker.add_argument("--seed", type=int, default=0)
+    worker.add_argument("--final", default=None)
+    worker.add_argument("--write-delay", type=float, default=0.0, help="sleep inside every checkpoint write (tests)")
+    worker.add_argument("--write-marker", default=None)
+    soak = sub.add_parser("soak", help="kill and resume in a loop, compare with an uninterrupted run")
+    soak.add_argument("--minutes", type=float, default=60.0)
+    soak.add_argument("--total", type=int, default=5000)
+    soak.add_argument("--save-freq", type=int, default=250)
+    soak.add_argument("--dataset", default=None)
+    soak.add_argument("--write-kill-share", type=float, default=0.25, help="share of kills made inside a checkpoint write")
+    soak.add_argument("--max-kill-after", type=float, default=None, help="longest wait before a kill, seconds")
+    soak.add_argument("--seed", type=int, default=0)
+    soak.add_argument("--workdir", default=None)
+    soak.add_argument("--out", default=None)
+    memory = sub.add_parser("memory", help="peak RSS of training on a synthetic dataset")
+    memory.add_argument("--n", type=int, default=2_000_000)
+    memory.add_argument("--obs-dim", type=int, default=17)
+    memory.add_argument("--act-dim", type=int, default=6)
+    memory.add_argument("--steps", type=int, default=200)
+    memory.add_argument("--rollout-length", type=int, default=1)
+    memory.add_argument("--full-size", action="store_true", help="the paper's network sizes instead of the light config")
+    memory.add_argument("--out", default=None)
+    args = parser.parse_args(argv)
+    return {"worker": run_worker, "soak": run_soak, "memory": run_memory}[args.command](args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,317 @@
+"""Fault injection: kills during training and checkpoint writes, corrupt and foreign files, NaN/inf, bad observations."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import random
+import re
+import signal
+import subprocess
+import time
+import zipfile
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3.common.callbacks import ConvertCallback
+
+from sb3_pola.benchmarks.soak import compare_checkpoints, make_light_model, worker_command
+from sb3_pola.common import checkpoint
+from sb3_pola.common.checkpoint import (
+    CheckpointCallback,
+    DivergenceError,
+    ModelFileError,
+    learn_with_checkpoints,
+    load_checkpoint,
+    save_checkpoint,
+    validate_model_file,
+)
+from sb3_pola.common.datasets import OfflineDataset
+from sb3_pola.pola.pola import POLA
+
+make_model = make_light_model  # POLA, light config, CPU, decaying learning rate: what the soak workers train
+
+
+def assert_same_training_state(a: POLA, b: POLA) -> None:
+    """Policy (actor, EMA, critics, targets, dynamics), both optimizers and the counters are bit-identical."""
+    assert (a.num_timesteps, a._n_updates) == (b.num_timesteps, b._n_updates)
+    state_a, state_b = a.policy.state_dict(), b.policy.state_dict()
+    assert state_a.keys() == state_b.keys()
+    different = [key for key in state_a if not th.equal(state_a[key], state_b[key])]
+    assert not different, different
+    for opt_a, opt_b in ((a.actor.optimizer, b.actor.optimizer), (a.critic.optimizer, b.critic.optimizer)):
+        sa, sb = opt_a.state_dict(), opt_b.state_dict()
+        assert sa["param_groups"] == sb["param_groups"]
+        for key, value in sa["state"].items():
+            for name, tensor in value.items():
+                assert th.equal(tensor, sb["state"][key][name]), (key, name)
+
+
+def in_memory_dataset(n: int = 64, rewards: np.ndarray | None = None) -> OfflineDataset:
+    rng = np.random.default_rng(0)
+    obs = rng.standard_normal((n, 3)).astype(np.float32)
+    return OfflineDataset(
+        observations=obs,
+        actions=rng.uniform(-1, 1, (n, 2)).astype(np.float32),
+        rewards=rng.standard_normal(n).astype(np.float32) if rewards is None else rewards.astype(np.float32),
+        next_observations=(obs + 0.1).astype(np.float32),
+        dones=np.zeros(n, dtype=np.float32),
+        observation_space=gym.spaces.Box(-np.inf, np.inf, (3,), np.float32),
+        action_space=gym.spaces.Box(-1.0, 1.0, (2,), np.float32),
+        dataset_id="test/in-memory",
+    )
+
+
+# --------------------------------------------------------------------------- determinism and exact resume
+
+
+def test_same_seed_same_parameters(tiny_dataset: str) -> None:
+    a = make_model(tiny_dataset, seed=1).learn(40)
+    th.manual_seed(999)  # the global RNG's state before a run must not matter: the model seeds it
+    b = make_model(tiny_dataset, seed=1).learn(40)
+    assert_same_training_state(a, b)
+    c = make_model(tiny_dataset, seed=2).learn(40)
+    assert not th.equal(a.policy.actor.input_layer.weight, c.policy.actor.input_layer.weight)
+
+
+class Crash(Exception):
+    pass
+
+
+def test_crash_then_resume_is_exact(tiny_dataset: str, tmp_path: pathlib.Path) -> None:
+    total, crash_at = 60, 37
+    reference = make_model(tiny_dataset).learn(total)
+
+    def crash(local_vars: dict, _globals: dict) -> bool:
+        if local_vars["self"].num_timesteps == crash_at:
+            raise Crash
+        return True
+
+    with pytest.raises(Crash):
+        learn_with_checkpoints(lambda: make_model(tiny_dataset), total, tmp_path, save_freq=10, callback=crash)
+    latest = tmp_path / "pola_latest.zip"
+    assert validate_model_file(latest)["num_timesteps"] == 30
+    th.manual_seed(12345)  # whatever ran in between, the checkpoint's RNG state is restored
+    resumed = learn_with_checkpoints(
+        lambda: make_model(tiny_dataset), total, tmp_path, save_freq=10, load_kwargs=dict(dataset=tiny_dataset, device="cpu")
+    )
+    assert resumed._total_timesteps == total  # same learning-rate schedule
+    assert_same_training_state(reference, resumed)
+    # the dynamics model of a resumed run is frozen again
+    assert resumed.policy.dynamics is not None
+    assert not any(p.requires_grad for p in resumed.policy.dynamics.parameters())
+
+
+def _wait_for(condition, process: subprocess.Popen, timeout: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition() and process.poll() is None:
+        if time.monotonic() > deadline:
+            process.kill()
+            raise TimeoutError("worker did not reach the expected point")
+        time.sleep(0.02)
+
+
+def test_sigkill_during_training_and_during_checkpoint_write(tiny_dataset: str, tmp_path: pathlib.Path) -> None:
+    """Real processes killed with SIGKILL at a random moment and inside a checkpoint write, then resumed."""
+    total, save_freq = 100, 20
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    # the uninterrupted run, in this process with the worker's settings (one thread, as the workers)
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    try:
+        reference = tmp_path / "reference.zip"
+        uninterrupted = learn_with_checkpoints(
+            lambda: make_model(tiny_dataset), total, tmp_path / "ref_run", save_freq, log_interval=0
+        )
+        save_checkpoint(uninterrupted, reference)
+    finally:
+        th.set_num_threads(threads)
+
+    run_dir = tmp_path / "run"
+    latest = run_dir / "pola_latest.zip"
+    final = tmp_path / "final.zip"
+    command = worker_command(tiny_dataset, run_dir, total, save_freq, final=final)
+
+    # 1. kill at a random moment after the first checkpoint
+    process = subprocess.Popen(command, env=env)
+    _wait_for(latest.is_file, process)
+    time.sleep(random.Random(os.getpid()).uniform(0.0, 0.5))
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    step_1 = validate_model_file(latest)["num_timesteps"]
+    assert step_1 % save_freq == 0 or step_1 in (1, total)
+
+    # 2. kill inside a checkpoint write: the temp file is complete, the rename has not happened
+    marker = tmp_path / "writing"
+    process = subprocess.Popen([*command, "--write-delay", "30", "--write-marker", str(marker)], env=env)
+    _wait_for(marker.exists, process)
+    assert process.poll() is None
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    stale = list(run_dir.glob(".pola_latest.zip.*.tmp.zip"))
+    assert len(stale) == 1  # the kill did land mid-write
+    step_2 = validate_model_file(latest)["num_timesteps"]  # the latest file is intact
+    assert step_2 >= step_1
+
+    # 3. resume to the end
+    subprocess.run(command, env=env, check=True)
+    assert not list(run_dir.glob(".*.tmp.zip"))  # stale temp files are cleaned up
+    assert compare_checkpoints(reference, final) == []
+
+
+def test_failed_write_keeps_previous_checkpoint(tiny_dataset: str, tmp_path: pathlib.Path, monkeypatch) -> None:
+    model = make_model(tiny_dataset).learn(5)
+    path = save_checkpoint(model, tmp_path / "ckpt.zip")
+    before = path.read_bytes()
+    model.learn(5, reset_num_timesteps=False)
+
+    def fail(tmp: pathlib.Path) -> None:
+        assert tmp.parent == path.parent and zipfile.is_zipfile(tmp)
+        assert path.read_bytes() == before  # while the new file is written, the old one is untouched
+        raise OSError("disk full")
+
+    monkeypatch.setattr(checkpoint, "before_replace_hook", fail)
+    with pytest.raises(OSError, match="disk full"):
+        save_checkpoint(model, path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ckpt.zip"]  # no temp file left
+
+
+def test_checkpoint_is_a_plain_model_file(tiny_dataset: str, tmp_path: pathlib.Path) -> None:
+    model = make_model(tiny_dataset).learn(5)
+    path = save_checkpoint(model, tmp_path / "ckpt")
+    assert path.name == "ckpt.zip"
+    loaded = POLA.load(path, device="cpu")  # SB3's load ignores the RNG member
+    obs = np.zeros((4, 3), dtype=np.float32)
+    np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+    state = th.get_rng_state()
+    load_checkpoint(POLA, path, device="cpu", dataset=tiny_dataset)
+    assert not th.equal(state, th.get_rng_state())  # restored the saved state
+
+
+# --------------------------------------------------------------------------- divergence guard
+
+
+def test_nan_parameter_stops_training_and_keeps_good_checkpoint(tiny_dataset: str, tmp_path: pathlib.Path) -> None:
+    def poison(local_vars: dict, _globals: dict) -> bool:
+        model = local_vars["self"]
+        if model.num_timesteps == 25:
+            with th.no_grad():
+                model.critic.q_net[0].weight[0, 0, 0] = float("nan")
+        return True
+
+    model = make_model(tiny_dataset)
+    model.check_finite_freq = 1
+    callback = CheckpointCallback(save_freq=10, save_path=tmp_path)
+    with pytest.raises(
+        DivergenceError,
+        match=r"NaN or inf in losses .*critic_loss.*; parameters .* at gradient step 26 \(first non-finite after step 25,",
+    ):
+        model.learn(100, callback=[callback, ConvertCallback(poison)])
+    latest = tmp_path / "pola_latest.zip"
+    good = latest.read_bytes()
+    assert validate_model_file(latest)["num_timesteps"] == 20
+    loaded = POLA.load(latest, device="cpu")
+    assert all(th.isfinite(v).all() for v in loaded.policy.state_dict().values() if v.is_floating_point())
+    # neither an explicit save nor the callback writes the NaN weights over the good model
+    with pytest.raises(DivergenceError, match="Not saving"):
+        model.save(latest)
+    with pytest.raises(DivergenceError):
+        callback.save()
+    assert latest.read_bytes() == good
+    model.save(tmp_path / "debug.zip", check_finite=False)  # possible on purpose
+
+
+def test_nan_loss_is_named(tmp_path: pathlib.Path) -> None:
+    rewards = np.zeros(64)
+    rewards[3] = np.inf  # one bad reward poisons the critic's TD target
+    model = make_model(in_memory_dataset(rewards=rewards), rollout_length=0)
+    model.check_finite_freq = 1  # every step: the error names the exact step
+    with pytest.raises(DivergenceError) as info:
+        model.learn(100, callback=CheckpointCallback(save_freq=1000, save_path=tmp_path))
+    message = str(info.value)
+    match = re.search(r"NaN or inf in losses [a-z_0-9, ]*critic_loss.* at gradient step (\d+) ", message)
+    assert match, message
+    assert f"(first non-finite after step {int(match.group(1)) - 1}," in message
+    assert not (tmp_path / "pola_latest.zip").exists() or validate_model_file(tmp_path / "pola_latest.zip")
+
+
+# --------------------------------------------------------------------------- load and predict validation
+
+
+@pytest.fixture
+def saved_model(tiny_dataset: str, tmp_path: pathlib.Path) -> tuple[POLA, pathlib.Path]:
+    model = make_model(tiny_dataset).learn(3)
+    path = tmp_path / "model.zip"
+    model.save(path)
+    return model, path
+
+
+def test_load_missing_file(tmp_path: pathlib.Path) -> None:
+    with pytest.raises(FileNotFoundError, match=r"No model file at .*nothing"):
+        POLA.load(tmp_path / "nothing")
+
+
+@pytest.mark.parametrize("keep", [0.0, 0.5, 0.99])
+def test_load_truncated_file(saved_model, keep: float) -> None:
+    _, path = saved_model
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * keep)])
+    with pytest.raises(ModelFileError, match="truncated or corrupt zip"):
+        POLA.load(path)
+
+
+def test_load_corrupt_member(saved_model) -> None:
+    _, path = saved_model
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo("policy.pth")
+    data = bytearray(path.read_bytes())
+    offset = info.header_offset + 30 + len(info.filename) + len(info.extra) + info.compress_size // 2
+    data[offset] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(ModelFileError, match=r"corrupt|not a valid"):
+        POLA.load(path)
+
+
+def test_load_foreign_zip(tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "foreign.zip"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("hello.txt", "not a model")
+    with pytest.raises(ModelFileError, match=r"not a saved POLA model file: it has no data, policy\.pth"):
+        POLA.load(path)
+
+
+def test_load_other_algorithm(tmp_path: pathlib.Path) -> None:
+    from stable_baselines3 import TD3
+
+    path = tmp_path / "td3.zip"
+    TD3("MlpPolicy", "Pendulum-v1", policy_kwargs=dict(net_arch=[8]), device="cpu").save(path)
+    with pytest.raises(ModelFileError, match="policy TD3Policy, not a POLA model"):
+        POLA.load(path)
+
+
+def test_load_onto_env_with_other_spaces(saved_model) -> None:
+    _, path = saved_model
+    env = gym.make("Pendulum-v1")
+    with pytest.raises(
+        ValueError, match=r"model has observation space Box.*\(3,\).*the env has observation space Box.*\(3,\)"
+    ):
+        POLA.load(path, env=env)
+
+
+def test_predict_rejects_bad_observations(saved_model) -> None:
+    model, _ = saved_model
+    assert model.predict(np.zeros(3, dtype=np.float32))[0].shape == (2,)
+    assert model.predict(np.zeros((5, 3), dtype=np.float32))[0].shape == (5, 2)
+    with pytest.raises(ValueError, match=r"shape \(4,\); this model expects \(3,\)"):
+        model.predict(np.zeros(4, dtype=np.float32))
+    with pytest.raises(ValueError, match=r"shape \(2, 2, 3\)"):
+        model.predict(np.zeros((2, 2, 3), dtype=np.float32))
+    bad = np.zeros((2, 3), dtype=np.float32)
+    bad[1, 2] = np.nan
+    with pytest.raises(ValueError, match=r"NaN or inf \(1 values, e.g. at index \(1, 2\): nan\)"):
+        model.predict(bad)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        model.predict(np.array([0.0, np.inf, 0.0]))
