@@ -125,8 +125,8 @@ def test_normalized_score(tiny_dataset, tiny_datasets_root, make_dataset):
 def test_cache_hit(tiny_dataset, tmp_path, monkeypatch):
     cache = tmp_path / "cache"
     first = load_offline_dataset(tiny_dataset, cache_dir=cache)
-    files = list(cache.glob("*.npz"))
-    assert len(files) == 1 and not list(cache.glob("*.tmp"))
+    entries = list(cache.iterdir())
+    assert len(entries) == 1 and (entries[0] / "manifest.json").is_file()
 
     def no_read(*args, **kwargs):
         raise AssertionError("episodes read despite a valid cache")
@@ -152,24 +152,25 @@ def test_cache_invalidated_when_dataset_changes(make_dataset, tmp_path):
     assert not np.array_equal(before.observations, after.observations)
     fresh = load_offline_dataset(dataset_id, use_cache=False)
     np.testing.assert_array_equal(after.observations, fresh.observations)
-    assert len(list(cache.glob("*.npz"))) == 2
+    assert len(list(cache.iterdir())) == 2
 
 
-@pytest.mark.parametrize("damage", ["truncate", "garbage", "wrong_shape"])
+@pytest.mark.parametrize("damage", ["truncate", "bitflip", "wrong_shape", "manifest"])
 def test_corrupt_cache_rebuilt(tiny_dataset, tmp_path, damage):
     cache = tmp_path / "cache"
     good = load_offline_dataset(tiny_dataset, cache_dir=cache)
-    (path,) = cache.glob("*.npz")
+    (entry,) = cache.iterdir()
+    path = entry / "observations.npy"
     if damage == "truncate":
         path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
-    elif damage == "garbage":
+    elif damage == "bitflip":
         raw = bytearray(path.read_bytes())
-        raw[200:260] = b"\x00" * 60  # inside the first array's bytes: CRC mismatch
+        raw[-5] ^= 0xFF  # a data byte: only the CRC-32 sees it
         path.write_bytes(bytes(raw))
+    elif damage == "wrong_shape":
+        np.save(path, np.load(path)[:-1])
     else:
-        arrays = dict(np.load(path))
-        arrays["observations"] = arrays["observations"][:-1]
-        np.savez(path, **arrays)
+        (entry / "manifest.json").write_text("{not json")
     with pytest.warns(UserWarning, match="cache"):
         again = load_offline_dataset(tiny_dataset, cache_dir=cache)
     np.testing.assert_array_equal(again.observations, good.observations)
