@@ -1,0 +1,187 @@
+"""The optimised gradient step and sampling give the numbers of a plain reference written from the paper's equations.
+
+No timings here (speed is measured by ``sb3-pola bench``); these tests pin the math the optimisations must keep.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+import torch as th
+from torch.nn import functional as F
+
+from sb3_pola.benchmarks.common import make_pola, synthetic_dataset
+from sb3_pola.common.activations import FusedMish, compiled_mish, mish_exp
+
+RTOL, ATOL = 1e-4, 1e-5
+
+
+def _model(**kwargs):
+    data = synthetic_dataset(2_000, 5, 2, env_id="Hopper-v5" if kwargs.pop("hopper", False) else None)
+    params = dict(
+        n_critics=4,
+        top_k=2,
+        rollout_length=2,
+        batch_size=32,
+        max_grad_norm=None,
+        ema_update_freq=1,
+        ema_start=0,
+        policy_kwargs={"net_arch": [32, 32]},
+        dynamics_kwargs={"n_members": 3, "n_elites": 2, "hidden_dim": 16, "n_layers": 2},
+    )
+    params.update(kwargs)
+    return make_pola(data, **params)
+
+
+def ref_q(critic, obs: th.Tensor, actions: th.Tensor, detach: bool = False) -> th.Tensor:
+    """``[N, B]`` Q-values, member by member with plain matmuls (no batched ensemble)."""
+    x = th.cat((critic.features_extractor(obs), actions), dim=-1)
+    layers = [m for m in critic.q_net if hasattr(m, "weight")]
+    out = []
+    for i in range(critic.n_critics):
+        h = x
+        for j, layer in enumerate(layers):
+            w, b = layer.weight[i], layer.bias[i, 0]
+            if detach:
+                w, b = w.detach(), b.detach()
+            h = h @ w + b
+            if j < len(layers) - 1:
+                h = F.mish(h)
+        out.append(h.squeeze(-1))
+    return th.stack(out)
+
+
+def ref_sample(actor, features: th.Tensor, generator: th.Generator | None = None) -> th.Tensor:
+    """DDPM reverse chain (eq. 5) with the concatenated input layer and the schedule's own ``step``."""
+    batch, n = features.shape[0], actor.n_diffusion_steps
+    noise = th.randn((n + 1, batch, actor.action_dim), generator=generator)
+    x = noise[-1]
+    for t in reversed(range(n)):
+        eps = actor.predict_noise(x, th.full((batch,), t, dtype=th.long), features)
+        x = actor.schedule.step(eps, t, x, noise[t])
+    return x.clamp(-1.0, 1.0)
+
+
+def reference_step(model, policy, batch) -> dict[str, object]:
+    """One POLA update written plainly from the paper: critic TD step, actor ``L_d + eta L_q``, EMA and targets."""
+    obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
+    rewards, dones = batch.rewards.flatten(), batch.dones.flatten()
+    actor, critic = policy.actor, policy.critic
+    feats = policy.features_extractor
+    with th.no_grad():
+        next_q = ref_q(policy.critic_target, next_obs, ref_sample(policy.actor_ema, feats(next_obs))).min(dim=0).values
+        target = rewards + model.gamma * (1.0 - dones) * next_q
+    q = ref_q(critic, obs, actions)
+    critic_loss = sum(((q[i] - target) ** 2).mean() for i in range(critic.n_critics))
+    critic.optimizer.zero_grad()
+    critic_loss.backward()
+    critic_grads = [p.grad.clone() for p in critic.parameters()]
+    critic.optimizer.step()
+
+    # L_d (eq. 6)
+    features = feats(obs)
+    t = th.randint(0, actor.n_diffusion_steps, (actions.shape[0],))
+    noise = th.randn_like(actions)
+    x_t = actor.schedule.sqrt_alphas_cumprod[t, None] * actions + actor.schedule.sqrt_one_minus_alphas_cumprod[t, None] * noise
+    bc_loss = ((actor.predict_noise(x_t, t, features) - noise) ** 2).mean()
+    # L_q (eq. 3, 4): gamma^i-weighted top-K pessimistic Q along the model rollout, masked after termination
+    state, action = obs, ref_sample(actor, features)
+    alive = th.ones(obs.shape[0])
+    terms = []
+    for i in range(model.rollout_length + 1):
+        q_i = ref_q(critic, state, action, detach=True)
+        q_k = q_i.sort(dim=0).values[: model.top_k].mean(dim=0)
+        terms.append((q_k, alive))
+        if i == model.rollout_length:
+            break
+        next_state, _, term_prob = policy.dynamics.step(state, action)
+        term = model._termination_fn(state, action, next_state).float() if model._termination_fn else term_prob.detach()
+        alive = alive * (1.0 - term)
+        state = next_state
+        action = ref_sample(actor, feats(state))
+    scale = terms[0][0].abs().mean().detach().clamp_min(1e-6)
+    q_loss = -sum(model.gamma**i * (a * q_k).mean() for i, (q_k, a) in enumerate(terms)) / scale
+    actor_loss = bc_loss + model.eta * q_loss
+    actor.optimizer.zero_grad()
+    actor_loss.backward()
+    actor_grads = [p.grad.clone() for p in actor.parameters()]
+    actor.optimizer.step()
+    with th.no_grad():  # EMA (ema_start=0, every step) and Polyak targets
+        for p, p_ema in zip(actor.parameters(), policy.actor_ema.parameters(), strict=True):
+            p_ema.copy_(model.ema_decay * p_ema + (1 - model.ema_decay) * p)
+        for p, p_t in zip(critic.parameters(), policy.critic_target.parameters(), strict=True):
+            p_t.copy_((1 - model.tau) * p_t + model.tau * p)
+    return {
+        "critic_loss": critic_loss,
+        "bc_loss": bc_loss,
+        "q_loss": q_loss,
+        "actor_loss": actor_loss,
+        "critic_grads": critic_grads,
+        "actor_grads": actor_grads,
+    }
+
+
+def _close(a: th.Tensor, b: th.Tensor) -> None:
+    th.testing.assert_close(a.detach(), b.detach(), rtol=RTOL, atol=ATOL)
+
+
+@pytest.mark.parametrize("kwargs", [{"hopper": True}, {}, {"rollout_length": 0}, {"backprop_through_model": True, "eta": 2.5}])
+def test_update_matches_reference(kwargs):
+    model = _model(**kwargs)
+    policy = model.policy
+    ref_policy = copy.deepcopy(policy)  # its optimizers follow the copied parameters
+    model._n_updates = 10  # past ema_start, an EMA step (ema_update_freq=1)
+    buffer = model._setup_offline_data()
+    th.manual_seed(0)
+    batch = buffer.sample(32)
+    th.manual_seed(1)
+    stats = model._update(batch)
+    critic_grads = [p.grad for p in policy.critic.parameters()]
+    actor_grads = [p.grad for p in policy.actor.parameters()]
+    th.manual_seed(1)
+    ref = reference_step(model, ref_policy, batch)
+    for key in ("critic_loss", "bc_loss", "q_loss", "actor_loss"):
+        _close(stats[key], ref[key])
+    for got, want in zip(critic_grads + actor_grads, ref["critic_grads"] + ref["actor_grads"], strict=True):
+        _close(got, want)
+    # parameters, EMA actor and target critics after the optimiser steps and the averaging
+    for got, want in zip(policy.parameters(), ref_policy.parameters(), strict=True):
+        _close(got, want)
+    for got, want in zip(policy.critic_target.parameters(), ref_policy.critic_target.parameters(), strict=True):
+        _close(got, want)
+
+
+def test_sample_matches_reference_and_time_cache_follows_updates():
+    model = _model()
+    actor = model.policy.actor_ema
+    feats = model.policy.actor_features(th.randn(16, 5))
+    for _ in range(2):
+        with th.no_grad():
+            got = actor.sample(feats, generator=th.Generator().manual_seed(3))
+            want = ref_sample(actor, feats, generator=th.Generator().manual_seed(3))
+        _close(got, want)
+        with th.no_grad():  # an in-place update (as EMA / load_state_dict do) must invalidate the cached time projection
+            for p in actor.parameters():
+                p.add_(0.05 * th.randn_like(p))
+
+
+def test_mish_exp_equals_mish():
+    x = th.cat((th.linspace(-30, 30, 2001), th.tensor([-100.0, 100.0, 0.0]))).requires_grad_(True)
+    y = x.detach().clone().requires_grad_(True)
+    _close(mish_exp(x), F.mish(y))
+    mish_exp(x).sum().backward()
+    F.mish(y).sum().backward()
+    _close(x.grad, y.grad)
+    assert th.isfinite(x.grad).all()
+
+
+@pytest.mark.slow
+def test_compiled_mish_equals_mish():
+    x = th.randn(4, 64, 32, requires_grad=True)
+    y = x.detach().clone().requires_grad_(True)
+    _close(compiled_mish(x), F.mish(y))
+    compiled_mish(x).sum().backward()
+    F.mish(y).sum().backward()
+    _close(x.grad, y.grad)
+    _close(FusedMish()(x), F.mish(x))
