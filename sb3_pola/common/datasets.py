@@ -297,7 +297,7 @@ def _cache_path(cache_dir: pathlib.Path, dataset_id: str | None, total_steps: in
 
 
 def _crc(array: np.ndarray) -> int:
-    return zlib.crc32(memoryview(np.ascontiguousarray(array)).cast("B"))
+    return zlib.crc32(np.ascontiguousarray(array).view(np.uint8).reshape(-1).data)
 
 
 def _load_cache(path: pathlib.Path, n_steps: int, obs_dim: int, act_dim: int) -> dict[str, np.ndarray] | None:
