@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -13,6 +14,16 @@ from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.torch_layers import VectorizedLinear
 
 OBS_DIM, ACT_DIM = 5, 2
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> Iterator[None]:
+    """One torch thread per test (pytest runs with -n 2): small matmuls gain nothing from more, and
+    oversubscribed OpenMP threads are an order of magnitude slower on a busy machine. Restored afterwards."""
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    yield
+    th.set_num_threads(threads)
 
 
 def _synthetic(n: int, nonlinear: bool, seed: int = 0) -> dict[str, th.Tensor]:
