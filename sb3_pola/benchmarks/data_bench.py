@@ -15,6 +15,7 @@ import pathlib
 import resource
 import tempfile
 import time
+import tracemalloc
 import warnings
 from typing import Any
 
@@ -86,6 +87,15 @@ def measure(dataset: Any, cache_dir: pathlib.Path) -> dict[str, Any]:
     float32_bytes = sum(
         int(np.prod(getattr(data, n).shape)) * 4 for n in ("observations", "next_observations", "actions", "rewards", "dones")
     )
+    # Python-level peak (numpy reports its buffers to tracemalloc) while building and while reloading
+    peaks = {}
+    for label, use_cache in (("build", False), ("cached", True)):
+        del data
+        gc.collect()
+        tracemalloc.start()
+        data = load_offline_dataset(dataset, cache_dir=cache_dir, use_cache=use_cache)
+        peaks[label] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
     rss_before_buffer = _current_rss_mb()
     buffer = OfflineReplayBuffer(data, device="cpu")
     buffer_extra_mb = _current_rss_mb() - rss_before_buffer
@@ -97,6 +107,8 @@ def measure(dataset: Any, cache_dir: pathlib.Path) -> dict[str, Any]:
         "float32_mb": round(float32_bytes / 2**20, 1),
         "arrays_mb": round(data.nbytes / 2**20, 1),
         "arrays_over_float32": round(data.nbytes / float32_bytes, 3),
+        "tracemalloc_peak_build_over_float32": round(peaks["build"] / float32_bytes, 3),
+        "tracemalloc_peak_cached_over_float32": round(peaks["cached"] / float32_bytes, 3),
         "rss_growth_first_load_mb": round(rss_after_first - rss_before, 1),
         "buffer_extra_rss_mb": round(buffer_extra_mb, 1),
         "buffer_shares_memory": bool(np.shares_memory(buffer.observations.numpy(), data.observations)),
