@@ -95,10 +95,10 @@ def test_fit_beats_no_change_baseline(nonlinear: bool) -> None:
     data = _synthetic(2000, nonlinear)
     th.manual_seed(0)
     model = _small()
-    metrics = model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=15, learning_rate=3e-3)
+    metrics = model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=40, learning_rate=1e-2)
     assert metrics["holdout_mse"] < 0.2 * metrics["no_change_mse"], metrics
     assert metrics["holdout_reward_mse"] < 0.2 * float(data["rew"].var()), metrics
-    assert metrics["epochs"] <= 15 and metrics["steps"] > 0 and metrics["fit_time"] > 0
+    assert metrics["epochs"] <= 40 and metrics["steps"] > 0 and metrics["fit_time"] > 0
     assert model.elites.dtype == th.long and model.elites.shape == (3,)
     assert len(set(model.elites.tolist())) == 3
     # the normalisation statistics come from the data
