@@ -143,17 +143,25 @@ def test_sigkill_during_training_and_during_checkpoint_write(tiny_dataset: str, 
     step_1 = validate_model_file(latest)["num_timesteps"]
     assert step_1 % save_freq == 0 or step_1 in (1, total)
 
-    # 2. kill inside a checkpoint write: the temp file is complete, the rename has not happened
-    marker = tmp_path / "writing"
-    process = subprocess.Popen([*command, "--write-delay", "30", "--write-marker", str(marker)], env=env)
-    _wait_for(marker.exists, process)
-    assert process.poll() is None
-    process.send_signal(signal.SIGKILL)
-    process.wait()
-    stale = list(run_dir.glob(".pola_latest.zip.*.tmp.zip"))
-    assert len(stale) == 1  # the kill did land mid-write
-    step_2 = validate_model_file(latest)["num_timesteps"]  # the latest file is intact
-    assert step_2 >= step_1
+    # 2. kill inside checkpoint writes: while SB3 writes the zip (the temp file is a truncated zip), and
+    # after the temp file is complete but before the rename
+    step = step_1
+    for stage in ("mid_zip", "before_replace"):
+        marker = tmp_path / f"writing_{stage}"
+        process = subprocess.Popen(
+            [*command, "--write-delay", "30", "--write-marker", str(marker), "--write-stage", stage], env=env
+        )
+        _wait_for(marker.exists, process)
+        assert process.poll() is None
+        process.send_signal(signal.SIGKILL)
+        process.wait()
+        stale = list(run_dir.glob(".pola_latest.zip.*.tmp.zip"))
+        assert len(stale) == 1  # the kill did land mid-write (the stale file of the first kill was removed at start)
+        if stage == "mid_zip":
+            with pytest.raises(ModelFileError, match="truncated"):
+                validate_model_file(stale[0])
+        assert validate_model_file(latest)["num_timesteps"] >= step  # the latest file is intact
+        step = validate_model_file(latest)["num_timesteps"]
 
     # 3. resume to the end
     subprocess.run(command, env=env, check=True)

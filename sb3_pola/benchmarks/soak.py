@@ -69,11 +69,20 @@ def run_worker(args: argparse.Namespace) -> int:
     if args.write_delay > 0:
         marker = pathlib.Path(args.write_marker)
 
-        def slow_write(tmp: pathlib.Path) -> None:
-            marker.write_text(str(tmp))  # the parent kills us now: the temp file exists, the rename has not happened
+        def pause(where: str) -> None:
+            marker.write_text(where)  # the parent kills us now
             time.sleep(args.write_delay)
 
-        checkpoint.before_replace_hook = slow_write
+        if args.write_stage == "before_replace":  # the temp file is complete, the rename has not happened
+            checkpoint.before_replace_hook = lambda tmp: pause(str(tmp))
+        else:  # "mid_zip": inside SB3's zip writing, the temp file is a truncated zip (torch.save of this process only)
+            real_save = th.save
+
+            def slow_save(*save_args: Any, **save_kwargs: Any) -> None:
+                pause("mid_zip")
+                real_save(*save_args, **save_kwargs)
+
+            th.save = slow_save
     model = checkpoint.learn_with_checkpoints(
         lambda: make_light_model(args.dataset, args.seed),
         total_timesteps=args.total,
@@ -244,7 +253,8 @@ def run_soak(args: argparse.Namespace) -> int:
             marker = work / "writing"
             marker.unlink(missing_ok=True)
             if during_write:
-                command += ["--write-delay", "5", "--write-marker", str(marker)]
+                stage = rng.choice(["before_replace", "mid_zip"])
+                command += ["--write-delay", "5", "--write-marker", str(marker), "--write-stage", stage]
             log = work / "worker.log"
             with open(log, "wb") as log_file:  # a file, not a pipe: a chatty worker must never block on it
                 process = subprocess.Popen(command, env=env, stdout=log_file, stderr=subprocess.STDOUT)
@@ -393,6 +403,7 @@ def main(argv: list[str] | None = None) -> int:
     worker.add_argument("--final", default=None)
     worker.add_argument("--write-delay", type=float, default=0.0, help="sleep inside every checkpoint write (tests)")
     worker.add_argument("--write-marker", default=None)
+    worker.add_argument("--write-stage", choices=["before_replace", "mid_zip"], default="before_replace")
     soak = sub.add_parser("soak", help="kill and resume in a loop, compare with an uninterrupted run")
     soak.add_argument("--minutes", type=float, default=60.0)
     soak.add_argument("--total", type=int, default=5000)
