@@ -75,15 +75,15 @@ def measure(dataset: Any, cache_dir: pathlib.Path) -> dict[str, Any]:
     """Time a first load (cache empty) and a cached load; memory of the arrays and the process."""
     gc.collect()
     rss_before = _current_rss_mb()
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     data = load_offline_dataset(dataset, cache_dir=cache_dir)
-    first = time.perf_counter() - start
+    first, first_cpu = time.perf_counter() - start, time.process_time() - cpu_start
     rss_after_first = _current_rss_mb()
     del data
     gc.collect()
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     data = load_offline_dataset(dataset, cache_dir=cache_dir)
-    cached = time.perf_counter() - start
+    cached, cached_cpu = time.perf_counter() - start, time.process_time() - cpu_start
     float32_bytes = sum(
         int(np.prod(getattr(data, n).shape)) * 4 for n in ("observations", "next_observations", "actions", "rewards", "dones")
     )
@@ -104,6 +104,9 @@ def measure(dataset: Any, cache_dir: pathlib.Path) -> dict[str, Any]:
         "episodes": len(data.episode_returns),
         "first_load_s": round(first, 3),
         "cached_load_s": round(cached, 3),
+        # CPU time of this process: the wall times above grow on a shared, overloaded machine
+        "first_load_cpu_s": round(first_cpu, 3),
+        "cached_load_cpu_s": round(cached_cpu, 3),
         "float32_mb": round(float32_bytes / 2**20, 1),
         "arrays_mb": round(data.nbytes / 2**20, 1),
         "arrays_over_float32": round(data.nbytes / float32_bytes, 3),
