@@ -399,8 +399,9 @@ def _fmt(values: list[float]) -> str:
     values = [v for v in values if not math.isnan(v)]
     if not values:
         return "-"
-    std = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
-    return f"{np.mean(values):.1f} ± {std:.1f}"
+    if len(values) == 1:
+        return f"{values[0]:.1f}"  # one seed: no spread to show
+    return f"{np.mean(values):.1f} ± {np.std(values, ddof=1):.1f}"
 
 
 def summarize(rows: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
@@ -469,7 +470,7 @@ def markdown_table(rows: list[dict[str, Any]], variants: list[str], config: dict
     lines.append("")
     lines.append(
         "final: score of the last evaluation; best: best evaluation of each run; mean ± sample std over seeds "
-        "(± 0.0 with one seed). Scores are D4RL-normalised (100 = the dataset's reference expert)."
+        "(a single number: one seed). Scores are D4RL-normalised (100 = the dataset's reference expert)."
     )
     return "\n".join(lines) + "\n"
 
@@ -548,7 +549,12 @@ def write_reports(out: pathlib.Path, variants: list[str], config: dict[str, Any]
 
 
 def machine_info(device: str) -> str:
-    text = f"{platform.node() or 'host'}: {platform.processor() or platform.machine()}, {os.cpu_count()} CPU cores"
+    cpu = platform.processor() or platform.machine()
+    try:  # Linux: the CPU's model name
+        cpu = next(line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    text = f"{cpu}, {os.cpu_count()} CPU cores"
     if device.startswith("cuda"):
         import torch as th
 
