@@ -63,6 +63,17 @@ def _status(met: bool | None) -> str:
     return "" if met is None else ("met" if met else "MISSED")
 
 
+def _flatten(value: Any, prefix: str = "") -> list[tuple[str, str]]:
+    """``(dotted key, rounded value)`` of every leaf of nested dicts and lists."""
+    if isinstance(value, dict):
+        return [item for k, v in value.items() for item in _flatten(v, f"{prefix}.{k}" if prefix else str(k))]
+    if isinstance(value, list):
+        return [item for i, v in enumerate(value) for item in _flatten(v, f"{prefix}[{i}]")]
+    if isinstance(value, float):
+        return [(prefix, f"{value:.4g}")]
+    return [(prefix, str(value))]
+
+
 def format_tables(results: dict[str, Any]) -> str:
     """Markdown tables of the results, each figure next to its target where the issue sets one."""
     info = results["machine"]
@@ -112,36 +123,43 @@ def format_tables(results: dict[str, Any]) -> str:
             lines.append(f"| 1M / 100k transitions step time | {s['ratio']:.2f}x | {s['target']} | {_status(s['met'])} |")
     pred = results.get("predict")
     if isinstance(pred, dict) and "single" in pred:
-        s, b = pred["single"], pred["batched"]
+        s = pred["single"]
         lines += [
             "",
             "| predict | POLA | SB3 SAC | target | status |",
             "|---|---|---|---|---|",
-            f"| one observation, median of {s['n_calls']} | {_ms(s['pola_median_s'])} ({s['ratio']:.2f}x SAC) | {_ms(s['sac_median_s'])} | <= 2x SAC | {_status(s['met'])} |",  # noqa: E501
+            f"| one observation, median of {s['n_calls']} | {_ms(s['pola_median_s'])} ({s['ratio']:.2f}x SAC) "
+            f"| {_ms(s['sac_median_s'])} | <= 2x SAC | {_status(s['met'])} |",
             f"| one observation, p99 | {_ms(s['pola_p99_s'])} | {_ms(s['sac_p99_s'])} | | |",
-            f"| batch of {b['batch']} | {_ms(b['seconds'])}, {_fmt(b['obs_per_s'], 'obs/s')}, roofline fraction {b['roofline_fraction']:.2f} "  # noqa: E501
-            f"({_fmt(b['achieved_flops_per_s'], 'FLOP/s')} vs {_fmt(b['matmul_flops_per_s'], 'FLOP/s')}) | | >= 0.5 | {_status(b['roofline_fraction'] >= 0.5)} |",  # noqa: E501
         ]
+        for variant, b in pred["batched"].items():
+            lines.append(
+                f"| batch of {b['batch']}, {variant} | {_ms(b['seconds'])}, {_fmt(b['obs_per_s'], 'obs/s')}; roofline fraction "  # noqa: E501
+                f"{b['roofline_fraction']:.2f} ({_fmt(b['achieved_flops_per_s'], 'FLOP/s')} vs matmuls alone "
+                f"{_fmt(b['matmul_flops_per_s'], 'FLOP/s')}) | | >= 0.5 | {_status(b['roofline_fraction'] >= 0.5)} |"
+            )
+    elif pred is not None:
+        lines += ["", f"predict: {pred}"]
     for name in ("data", "dynamics"):
         section = results.get(name)
-        if section is None:
-            continue
-        lines += ["", f"{name}:", "```", json.dumps(section, indent=1, default=str)[:3000], "```"]
+        if section is not None:
+            lines += ["", f"{name} (from `sb3_pola.benchmarks.{name}_bench`):", ""]
+            lines += [f"- {key}: {value}" for key, value in _flatten(section)]
     lines += ["", f"Total benchmark time: {results['total_s']:.0f} s"]
     return "\n".join(lines)
 
 
-def run_section(name: str, quick: bool, device: str, policy_kwargs: dict[str, Any]) -> Any:
+def run_section(name: str, quick: bool, device: str, policy_kwargs: dict[str, Any], compiled: bool) -> Any:
     start = time.perf_counter()
     try:
         if name == "train":
             from sb3_pola.benchmarks import train_bench
 
-            result: Any = train_bench.run(quick, device, policy_kwargs=policy_kwargs)
+            result: Any = train_bench.run(quick, device, policy_kwargs=policy_kwargs, compiled=compiled)
         elif name == "predict":
             from sb3_pola.benchmarks import predict_bench
 
-            result = predict_bench.run(quick, device, policy_kwargs=policy_kwargs)
+            result = predict_bench.run(quick, device, policy_kwargs=policy_kwargs, compiled=compiled)
         else:  # the data and dynamics benchmarks (their own modules, CPU/GPU as they choose)
             module = importlib.import_module(f"sb3_pola.benchmarks.{name}_bench")
             result = module.run(quick)
@@ -160,27 +178,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=None, help="torch intra-op threads (default: all cores)")
     parser.add_argument("--only", nargs="+", choices=SECTIONS, default=list(SECTIONS), help="sections to run")
     parser.add_argument(
-        "--compile", action="store_true", help="compiled fused activations (policy_kwargs compile_activations=True)"
+        "--compile", choices=("auto", "on", "off"), default="auto", help="also time compiled Mish (auto: full mode only)"
     )
     args = parser.parse_args(argv)
     device = ("cuda" if th.cuda.is_available() else "cpu") if args.device == "auto" else args.device
     threads = args.threads or len(os.sched_getaffinity(0))
     th.set_num_threads(threads)
-    policy_kwargs = {"compile_activations": True} if args.compile else {}
+    compiled = args.compile == "on" or (args.compile == "auto" and not args.quick)
+    policy_kwargs: dict[str, Any] = {}
 
     start = time.perf_counter()
-    results: dict[str, Any] = {"machine": machine_info(device), "quick": args.quick, "policy_kwargs": policy_kwargs}
+    results: dict[str, Any] = {"machine": machine_info(device), "quick": args.quick, "compiled": compiled}
     for name in args.only:
-        results[name] = run_section(name, args.quick, device, policy_kwargs)
+        results[name] = run_section(name, args.quick, device, policy_kwargs, compiled)
     results["total_s"] = time.perf_counter() - start
 
     table = format_tables(results)
     print(table)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    stem = f"bench_{device}{'_compile' if args.compile else ''}{'_quick' if args.quick else ''}"
+    stem = f"bench_{device}{'_quick' if args.quick else ''}"
     (out / f"{stem}.json").write_text(json.dumps(results, indent=2, default=str))
-    (out / ("README_table.md" if not args.quick and not args.compile else f"{stem}_table.md")).write_text(table + "\n")
+    (out / ("README_table.md" if not args.quick else f"{stem}_table.md")).write_text(table + "\n")
     print(f"[bench] wrote {out / (stem + '.json')}")
     return 0
 

@@ -122,6 +122,26 @@ def _strided_randn(size: tuple[int, ...], stride: tuple[int, ...], dtype: th.dty
     return th.randn(storage, dtype=dtype, device=device).as_strided(size, stride)
 
 
+def matmul_replay(calls: Counter[tuple[Any, ...]], device: th.device | str) -> tuple[Callable[[], None], int]:
+    """A function running the recorded matmuls alone (same shapes, strides and counts), and their FLOPs.
+
+    Timed next to the step, it gives the machine's matmul FLOP/s on the step's own shapes: the roofline's denominator.
+    """
+    work = []
+    total_flops = 0
+    for (func, key), count in calls.items():
+        args = [_strided_randn(k[0], k[1], k[2], device) if isinstance(k, tuple) else k for k in key]
+        work.append((func, args, count))
+        total_flops += count * _matmul_flops(func, key)
+
+    def replay() -> None:
+        for func, args, count in work:
+            for _ in range(count):
+                func(*args)
+
+    return replay, total_flops
+
+
 def matmul_roofline(calls: Counter[tuple[Any, ...]], device: th.device | str, reps: int = 5) -> dict[str, float]:
     """Time the recorded matmuls alone (same shapes, strides and counts): the machine's matmul FLOP/s on them.
 

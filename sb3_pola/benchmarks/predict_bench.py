@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 
-from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_roofline, median_time, synthetic_dataset
+from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_replay, synchronize, synthetic_dataset
 
 
 class _SpacesEnv(gym.Env):
@@ -43,12 +43,27 @@ def latency(predict: Any, obs: np.ndarray, n_calls: int) -> dict[str, float]:
     return {"median_s": float(np.median(times)), "p99_s": float(np.quantile(times, 0.99))}
 
 
+def interleaved_latency(predicts: list[Any], obs: np.ndarray, n_calls: int) -> list[dict[str, float]]:
+    """:func:`latency` of several predict functions, their calls alternating (fair under a drifting load)."""
+    for _ in range(20):
+        for predict in predicts:
+            predict(obs)
+    times = np.empty((len(predicts), n_calls))
+    for i in range(n_calls):
+        for j, predict in enumerate(predicts):
+            start = time.perf_counter()
+            predict(obs)
+            times[j, i] = time.perf_counter() - start
+    return [{"median_s": float(np.median(t)), "p99_s": float(np.quantile(t, 0.99))} for t in times]
+
+
 def run(
     quick: bool = False,
     device: str = "cpu",
     task: str = "hopper",
     batch: int = 1024,
     policy_kwargs: dict[str, Any] | None = None,
+    compiled: bool = False,
 ) -> dict[str, Any]:
     """Single-observation latency (POLA vs SAC, same observation space, same run) and batched predict throughput."""
     from stable_baselines3 import SAC
@@ -59,22 +74,51 @@ def run(
     sac = SAC("MlpPolicy", _SpacesEnv(data.observation_space, data.action_space), device=device, seed=0)
     obs = data.observations[0]
     n_calls = 300 if quick else 1000
-    pola_lat = latency(lambda o: model.predict(o, deterministic=True), obs, n_calls)
-    sac_lat = latency(lambda o: sac.predict(o, deterministic=True), obs, n_calls)
+    pola_lat, sac_lat = interleaved_latency(
+        [lambda o: model.predict(o, deterministic=True), lambda o: sac.predict(o, deterministic=True)], obs, n_calls
+    )
     ratio = pola_lat["median_s"] / sac_lat["median_s"]
 
-    # batched: the policy's forward on a device tensor (no numpy round trip), as an evaluation over many envs would
+    # batched: the policy's forward on a device tensor (no numpy round trip), as an evaluation over many envs would;
+    # timed interleaved with a replay of its matmuls alone (the roofline's denominator), eager and compiled Mish
     obs_batch = th.as_tensor(data.observations[:batch], device=device)
-    policy = model.policy
+    variants = {"eager": model}
+    if compiled:
+        variants["compiled Mish"] = make_pola(
+            data, device=device, policy_kwargs={**(policy_kwargs or {}), "compile_activations": True}
+        )
+    fns = {}
+    for name, variant in variants.items():
 
-    def batched() -> th.Tensor:
-        with th.no_grad():
-            return policy._predict(obs_batch, deterministic=True)
+        def batched(policy: Any = variant.policy) -> th.Tensor:
+            with th.no_grad():
+                return policy._predict(obs_batch, deterministic=True)
 
-    batch_s = median_time(batched, reps=5 if quick else 20, device=device, warmup=2)
-    flops, calls = count_flops(batched)
-    roof = matmul_roofline(calls, device, reps=3 if quick else 5)
-    achieved = flops / batch_s
+        batched()
+        fns[name] = batched
+    flops, calls = count_flops(fns["eager"])
+    replay, matmul_flops = matmul_replay(calls, device)
+    fns["matmuls"] = replay
+    times: dict[str, list[float]] = {name: [] for name in fns}
+    for _ in range(5 if quick else 20):
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            synchronize(device)
+            times[name].append(time.perf_counter() - start)
+    matmul_fps = matmul_flops / float(np.median(times["matmuls"]))
+    batched_results = {}
+    for name in variants:
+        seconds = float(np.median(times[name]))
+        batched_results[name] = {
+            "batch": batch,
+            "seconds": seconds,
+            "obs_per_s": batch / seconds,
+            "flops": flops,
+            "achieved_flops_per_s": flops / seconds,
+            "matmul_flops_per_s": matmul_fps,
+            "roofline_fraction": flops / seconds / matmul_fps,
+        }
     return {
         "task": task,
         "obs_dim": obs_dim,
@@ -88,15 +132,7 @@ def run(
             "target": "<= 2x SAC",
             "met": ratio <= 2.0,
         },
-        "batched": {
-            "batch": batch,
-            "seconds": batch_s,
-            "obs_per_s": batch / batch_s,
-            "flops": flops,
-            "achieved_flops_per_s": achieved,
-            "matmul_flops_per_s": roof["flops_per_s"],
-            "roofline_fraction": achieved / roof["flops_per_s"],
-        },
+        "batched": batched_results,
     }
 
 

@@ -10,12 +10,13 @@ import argparse
 import gc
 import json
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import torch as th
 
-from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_roofline, synchronize, synthetic_dataset
+from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_replay, synchronize, synthetic_dataset
 
 # the paper's configuration (N=10 critics, T=3 look-ahead steps, 5 diffusion steps, state products, batch 256)
 PAPER: dict[str, Any] = {
@@ -27,7 +28,7 @@ PAPER: dict[str, Any] = {
 }
 
 
-def configurations(quick: bool) -> list[dict[str, Any]]:
+def configurations(quick: bool, compiled: bool = False) -> list[dict[str, Any]]:
     """The benchmarked configurations: name, task size, dataset size, POLA arguments, whether to count FLOPs."""
     configs: list[dict[str, Any]] = [
         {"name": "paper hopper", "task": "hopper", "kwargs": {}, "flops": True},
@@ -47,62 +48,100 @@ def configurations(quick: bool) -> list[dict[str, Any]]:
     ]
     if quick:
         configs = [c for c in configs if c["name"] not in ("paper halfcheetah", "N=50", "batch 1024")]
+    elif compiled:  # the paper configurations again with Mish in a kernel fused by torch.compile
+        for task in ("hopper", "halfcheetah"):
+            configs.append(
+                {
+                    "name": f"paper {task}, compiled Mish",
+                    "task": task,
+                    "kwargs": {},
+                    "flops": True,
+                    "policy_kwargs": {"compile_activations": True},
+                }
+            )
     return configs
 
 
-def time_steps(model: Any, batch_size: int, device: str, budget_s: float, max_reps: int, chunk: int) -> dict[str, float]:
-    """Median time of one gradient step (``model.train``), in chunks of ``chunk`` steps, within a time budget."""
-    model.train(2, batch_size)  # warm-up (allocator, first-call paths)
-    synchronize(device)
-    times: list[float] = []
-    start = time.perf_counter()
-    while len(times) < max_reps and (len(times) < 3 or time.perf_counter() - start < budget_s):
-        t0 = time.perf_counter()
-        model.train(chunk, batch_size)
-        synchronize(device)
-        times.append((time.perf_counter() - t0) / chunk)
-    step = float(np.median(times))
-    return {"step_s": step, "steps_per_s": 1.0 / step, "reps": len(times) * chunk}
-
-
-def bench_config(
-    config: dict[str, Any],
-    device: str,
-    quick: bool,
-    datasets: dict[tuple[Any, ...], Any],
-    policy_kwargs: dict[str, Any] | None = None,
-) -> dict[str, Any]:
-    """Build the model of ``config`` and time its gradient step (and count its FLOPs when asked)."""
+def build(config: dict[str, Any], device: str, datasets: dict[tuple[Any, ...], Any], policy_kwargs: dict[str, Any]) -> Any:
+    """The model of ``config`` on a (shared) synthetic dataset, warmed up by two gradient steps."""
     obs_dim, act_dim, env_id = TASK_SIZES[config["task"]]
     n_data = config.get("n_data", 100_000)
     key = (n_data, obs_dim, act_dim, env_id)
     if key not in datasets:
         datasets[key] = synthetic_dataset(n_data, obs_dim, act_dim, env_id)
     kwargs = {**PAPER, **config["kwargs"]}
-    model = make_pola(datasets[key], device=device, policy_kwargs=policy_kwargs or {}, **kwargs)
-    batch_size = kwargs["batch_size"]
-    chunk = 1 if th.device(device).type == "cpu" else 20
-    result: dict[str, Any] = {
+    model = make_pola(
+        datasets[key], device=device, policy_kwargs={**policy_kwargs, **config.get("policy_kwargs", {})}, **kwargs
+    )
+    start = time.perf_counter()
+    model.train(2, kwargs["batch_size"])  # warm-up: allocator, first-call paths, compilation
+    synchronize(device)
+    config["_meta"] = {
         "name": config["name"],
         "obs_dim": obs_dim,
         "act_dim": act_dim,
         "n_data": n_data,
-        **{k: v for k, v in kwargs.items()},
-        **time_steps(model, batch_size, device, budget_s=4.0 if quick else 12.0, max_reps=8 if quick else 30, chunk=chunk),
+        **kwargs,
+        "policy_kwargs": {**policy_kwargs, **config.get("policy_kwargs", {})},
+        "warmup_s": time.perf_counter() - start,
     }
-    if config.get("flops"):
-        flops, calls = count_flops(lambda: model.train(1, batch_size))
-        roof = matmul_roofline(calls, device, reps=3 if quick else 5)
-        achieved = flops / result["step_s"]
-        result.update(
-            flops=flops,
-            achieved_flops_per_s=achieved,
-            matmul_flops_per_s=roof["flops_per_s"],
-            matmul_seconds=roof["seconds"],
-            roofline_fraction=achieved / roof["flops_per_s"],
-        )
+    return model
+
+
+def run(
+    quick: bool = False, device: str = "cpu", policy_kwargs: dict[str, Any] | None = None, compiled: bool = False
+) -> dict[str, Any]:
+    """Time every configuration, interleaved, and count FLOPs of the paper configurations.
+
+    All models are built first; then rounds time one step (``chunk`` steps on CUDA) of every model in turn,
+    and, for the configurations with a roofline, one replay of the step's matmuls alone. Interleaving
+    makes the ratios fair on a machine whose load drifts. Rounds continue until the time budget is
+    spent (at least 3 rounds). Medians per configuration.
+    """
+    datasets: dict[tuple[Any, ...], Any] = {}
+    configs = configurations(quick, compiled)
+    models = [build(config, device, datasets, policy_kwargs or {}) for config in configs]
+    chunk = 1 if th.device(device).type == "cpu" else 20
+    tasks: list[tuple[str, Any, Callable[[], Any]]] = []
+    flops: dict[str, int] = {}
+    matmul_flops: dict[str, int] = {}
+    for config, model in zip(configs, models, strict=True):
+        batch_size = config["_meta"]["batch_size"]
+        tasks.append(("step", config, lambda m=model, b=batch_size: m.train(chunk, b)))
+        if config.get("flops"):
+            flops[config["name"]], calls = count_flops(lambda m=model, b=batch_size: m.train(1, b))
+            replay, matmul_flops[config["name"]] = matmul_replay(calls, device)
+            tasks.append(("matmuls", config, replay))
+    times: dict[tuple[str, str], list[float]] = {(kind, c["name"]): [] for kind, c, _ in tasks}
+    budget, max_rounds = (35.0, 10) if quick else (300.0, 60)
+    start = time.perf_counter()
+    for round_ in range(max_rounds):
+        if round_ >= 3 and time.perf_counter() - start > budget:
+            break
+        for kind, config, fn in tasks:
+            t0 = time.perf_counter()
+            fn()
+            synchronize(device)
+            times[(kind, config["name"])].append((time.perf_counter() - t0) / (chunk if kind == "step" else 1))
+    results = []
+    for config in configs:
+        result = dict(config["_meta"])
+        step = float(np.median(times[("step", config["name"])]))
+        result.update(step_s=step, steps_per_s=1.0 / step, reps=len(times[("step", config["name"])]) * chunk)
+        if config["name"] in flops:
+            matmul_s = float(np.median(times[("matmuls", config["name"])]))
+            n_flops = flops[config["name"]]
+            result.update(
+                flops=n_flops,
+                achieved_flops_per_s=n_flops / step,
+                matmul_flops_per_s=matmul_flops[config["name"]] / matmul_s,
+                matmul_seconds=matmul_s,
+                roofline_fraction=(n_flops / step) / (matmul_flops[config["name"]] / matmul_s),
+            )
+        results.append(result)
+    del models
     gc.collect()
-    return result
+    return {"configs": results, "scaling": scaling_checks(results), "rounds": len(times[("step", configs[0]["name"])])}
 
 
 def scaling_checks(results: list[dict[str, Any]]) -> dict[str, Any]:
@@ -131,13 +170,6 @@ def scaling_checks(results: list[dict[str, Any]]) -> dict[str, Any]:
         ratio = by_name["paper hopper, 1M data"]["step_s"] / by_name["paper hopper"]["step_s"]
         checks["dataset_1m_over_100k"] = {"ratio": ratio, "target": "0.85 .. 1.15", "met": 0.85 <= ratio <= 1.15}
     return checks
-
-
-def run(quick: bool = False, device: str = "cpu", policy_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Time every configuration; returns ``configs`` (one dict each) and ``scaling`` (the growth checks)."""
-    datasets: dict[tuple[Any, ...], Any] = {}
-    results = [bench_config(config, device, quick, datasets, policy_kwargs) for config in configurations(quick)]
-    return {"configs": results, "scaling": scaling_checks(results)}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -29,6 +29,9 @@ def mish_exp(x: th.Tensor) -> th.Tensor:
     return x * n / (n + 2.0)
 
 
+# below this many elements the eager kernel wins: a compiled call's fixed overhead (guards) exceeds the saving
+MIN_COMPILED_NUMEL = 16_384
+
 _compiled: Callable[[th.Tensor], th.Tensor] | None = None
 _failed = False
 
@@ -36,7 +39,7 @@ _failed = False
 def compiled_mish(x: th.Tensor) -> th.Tensor:
     """Mish through a fused kernel compiled once (dynamic shapes); ``F.mish`` if compilation fails."""
     global _compiled, _failed
-    if _failed:
+    if _failed or x.numel() < MIN_COMPILED_NUMEL:
         return F.mish(x)
     if _compiled is None:
         _compiled = th.compile(mish_exp, dynamic=True)
