@@ -67,8 +67,9 @@ def make_pola(data: OfflineDataset, device: str = "cpu", seed: int = 0, **kwargs
     model.set_logger(configure(None, [""]))
     model._setup_offline_data()
     if model.policy.dynamics is not None:
-        model.policy.dynamics.requires_grad_(False).eval()  # as EnsembleDynamics.freeze
-        model.policy.dynamics_fitted.fill_(True)
+        model.policy.dynamics.requires_grad_(False)  # as EnsembleDynamics.freeze
+        model.policy.dynamics.eval()
+        model.policy.dynamics_fitted.fill_(True)  # type: ignore[operator]
     return model
 
 

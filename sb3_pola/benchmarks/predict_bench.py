@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -87,7 +88,7 @@ def run(
         variants["compiled Mish"] = make_pola(
             data, device=device, policy_kwargs={**(policy_kwargs or {}), "compile_activations": True}
         )
-    fns = {}
+    fns: dict[str, Callable[[], Any]] = {}
     for name, variant in variants.items():
 
         def batched(policy: Any = variant.policy) -> th.Tensor:

@@ -7,6 +7,7 @@ dynamics model is left as initialised and frozen, since its cost per step does n
 from __future__ import annotations
 
 import argparse
+import functools
 import gc
 import json
 import time
@@ -107,9 +108,9 @@ def run(
     matmul_flops: dict[str, int] = {}
     for config, model in zip(configs, models, strict=True):
         batch_size = config["_meta"]["batch_size"]
-        tasks.append(("step", config, lambda m=model, b=batch_size: m.train(chunk, b)))
+        tasks.append(("step", config, functools.partial(model.train, chunk, batch_size)))
         if config.get("flops"):
-            flops[config["name"]], calls = count_flops(lambda m=model, b=batch_size: m.train(1, b))
+            flops[config["name"]], calls = count_flops(functools.partial(model.train, 1, batch_size))
             replay, matmul_flops[config["name"]] = matmul_replay(calls, device)
             tasks.append(("matmuls", config, replay))
     times: dict[tuple[str, str], list[float]] = {(kind, c["name"]): [] for kind, c, _ in tasks}
