@@ -114,7 +114,7 @@ def run(
             replay, matmul_flops[config["name"]] = matmul_replay(calls, device)
             tasks.append(("matmuls", config, replay))
     times: dict[tuple[str, str], list[float]] = {(kind, c["name"]): [] for kind, c, _ in tasks}
-    budget, max_rounds = (35.0, 10) if quick else (300.0, 60)
+    budget, max_rounds = (35.0, 10) if quick else (180.0, 60)
     start = time.perf_counter()
     for round_ in range(max_rounds):
         if round_ >= 3 and time.perf_counter() - start > budget:
