@@ -497,6 +497,7 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
         "BC": "tab:gray",
     }
     for dataset in dict.fromkeys(r["dataset"] for r in rows):
+        data_score = dataset_score(dataset)
         for figure, members in FIGURES.items():
             present = [v for v in members if (dataset, v) in curves]
             if len([v for v in present if v != "BC"]) < 2:
@@ -520,6 +521,8 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
                 )
                 if n_seeds > 1:
                     ax.fill_between(steps, mean - std, mean + std, color=colors.get(variant), alpha=0.15)
+            if data_score is not None:
+                ax.axhline(data_score, color="black", ls=":", lw=1, label="dataset mean")
             title = "rollout length T" if figure == "rollout" else "state products"
             ax.set_title(f"{dataset}: {title}", fontsize=10)
             ax.set_xlabel("gradient steps")
