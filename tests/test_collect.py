@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch as th
 
 from sb3_pola import collect
 from sb3_pola.common.datasets import load_offline_dataset
@@ -26,10 +27,20 @@ def test_random_with_given_refs(tmp_path):
 
 
 def test_sac_path_all_kinds(tmp_path, monkeypatch):
+    threads = th.get_num_threads()
+    th.set_num_threads(1)  # two xdist workers on a small machine: avoid oversubscription
+    try:
+        _sac_path_all_kinds(tmp_path, monkeypatch)
+    finally:
+        th.set_num_threads(threads)
+
+
+def _sac_path_all_kinds(tmp_path, monkeypatch):
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
     argv = ["--env", "InvertedPendulum-v5", "--kind", "medium", "medium-replay", "medium-expert", "expert"]
-    argv += ["--steps", "150", "--train-steps", "300", "--eval-freq", "150", "--eval-episodes", "2"]
-    argv += ["--learning-starts", "100", "--no-progress", "--save-policies", str(tmp_path / "policies")]
+    # 60 gradient steps only: the SAC path is exercised, not trained
+    argv += ["--steps", "150", "--train-steps", "200", "--eval-freq", "100", "--eval-episodes", "2"]
+    argv += ["--learning-starts", "140", "--no-progress", "--save-policies", str(tmp_path / "policies")]
     assert collect.main(argv) == 0
     sizes = {}
     for kind in ("medium", "medium-replay", "medium-expert", "expert"):
@@ -38,7 +49,7 @@ def test_sac_path_all_kinds(tmp_path, monkeypatch):
         assert np.isfinite(data.normalized_score(data.episode_returns))
         sizes[kind] = len(data)
     assert sizes["medium"] == sizes["expert"] == 150 and sizes["medium-expert"] == 300
-    assert 0 < sizes["medium-replay"] <= 300
+    assert 0 < sizes["medium-replay"] <= 200
     # the medium-replay episodes chain: next_obs[t] == obs[t + 1] unless the episode ended
     replay = load_offline_dataset("invertedpendulum/medium-replay-v0")
     same = np.all(replay.next_observations[:-1] == replay.observations[1:], axis=1)
