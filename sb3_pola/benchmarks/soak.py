@@ -12,7 +12,9 @@ Not run in CI (``tests/test_reliability.py`` runs short versions). Commands::
     # one training process (what the soak loop starts and kills):
     python -m sb3_pola.benchmarks.soak worker --dataset ID --dir runs/x --total 5000 --save-freq 100
 
-Without ``--dataset`` the soak loop writes a small synthetic Minari dataset in a temp folder.
+Without ``--dataset`` the soak loop writes a small synthetic Minari dataset in a temp folder. Workers import
+the package afresh: run the soak from a checkout nobody edits (a changed source is detected, such runs are
+reported as inconclusive and the reference is recomputed).
 """
 
 from __future__ import annotations
@@ -151,6 +153,17 @@ def compare_checkpoints(path_a: str | os.PathLike, path_b: str | os.PathLike) ->
     return diffs
 
 
+def source_fingerprint() -> str:
+    """SHA-256 of the package's Python sources: workers import them afresh, so an edit mid-soak changes the numbers."""
+    import hashlib
+
+    package = pathlib.Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for source in sorted(package.rglob("*.py")):
+        digest.update(str(source.relative_to(package)).encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()
+
+
 def checkpoint_step(path: pathlib.Path) -> int | None:
     """The step of a valid checkpoint, ``None`` if there is none; raises if the file is broken."""
     from sb3_pola.common.checkpoint import validate_model_file
@@ -213,13 +226,16 @@ def run_soak(args: argparse.Namespace) -> int:
     rng = random.Random(args.seed)
     deadline = time.monotonic() + 60 * args.minutes
 
-    start = time.monotonic()
-    reference = work / "reference.zip"
-    subprocess.run(
-        worker_command(dataset, work / "reference_run", args.total, args.save_freq, 0, reference), env=env, check=True
-    )
-    reference_time = time.monotonic() - start
-    print(f"uninterrupted reference run: {args.total} steps in {reference_time:.1f} s", flush=True)
+    def reference_run(index: int) -> tuple[pathlib.Path, str, float]:
+        start, code = time.monotonic(), source_fingerprint()
+        path = work / f"reference_{index}.zip"
+        command = worker_command(dataset, work / f"reference_run_{index}", args.total, args.save_freq, 0, path)
+        subprocess.run(command, env=env, check=True)
+        seconds = time.monotonic() - start
+        print(f"uninterrupted reference run: {args.total} steps in {seconds:.1f} s (code {code[:12]})", flush=True)
+        return path, code, seconds
+
+    reference, reference_code, reference_time = reference_run(0)
 
     report: dict[str, Any] = dict(
         total_steps_per_run=args.total,
@@ -236,6 +252,8 @@ def run_soak(args: argparse.Namespace) -> int:
         max_steps_redone_after_kill=0,
         stale_temp_files_left_by_kills=0,
         mismatches=[],
+        runs_inconclusive_code_changed=0,
+        references_recomputed_after_code_change=0,
     )
     run_index = 0
     while time.monotonic() < deadline:
@@ -244,6 +262,7 @@ def run_soak(args: argparse.Namespace) -> int:
         latest = run_dir / "pola_latest.zip"
         last_step = 0
         attempts = 0
+        run_code = source_fingerprint()
         while time.monotonic() < deadline:
             attempts += 1
             if latest.is_file():
@@ -289,6 +308,14 @@ def run_soak(args: argparse.Namespace) -> int:
                 report["mismatches"].append(f"run {run_index}: worker exited with {process.returncode}")
                 break
             report["runs_completed"] += 1
+            if source_fingerprint() != run_code:
+                # the package's code changed while this run was killed and resumed: nothing to compare with
+                report["runs_inconclusive_code_changed"] += 1
+                print(f"run {run_index}: the code changed during the run, not compared", flush=True)
+                break
+            if run_code != reference_code:
+                report["references_recomputed_after_code_change"] += 1
+                reference, reference_code, _ = reference_run(report["references_recomputed_after_code_change"])
             diffs = compare_checkpoints(reference, final)
             if diffs:
                 report["mismatches"].append(f"run {run_index}: {diffs[:10]}")
