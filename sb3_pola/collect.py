@@ -402,7 +402,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out_root = pathlib.Path(
         args.out or os.environ.get("MINARI_DATASETS_PATH") or pathlib.Path.home() / ".minari" / "datasets"
-    ).expanduser()
+    ).expanduser().resolve()  # minari mangles relative dataset paths (get_size joins them twice)
     name = args.name or default_name(args.env)
     kinds = list(dict.fromkeys(args.kind))
     progress = not args.no_progress

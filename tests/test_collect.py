@@ -10,9 +10,10 @@ from sb3_pola import collect
 from sb3_pola.common.datasets import load_offline_dataset
 
 
-def test_random_with_given_refs(tmp_path):
+def test_random_with_given_refs(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # a relative --out, as in the README's command
     out = tmp_path / "out"
-    argv = ["--env", "InvertedPendulum-v5", "--kind", "random", "--steps", "200", "--out", str(out)]
+    argv = ["--env", "InvertedPendulum-v5", "--kind", "random", "--steps", "200", "--out", "out"]
     argv += ["--ref-max-score", "1000", "--no-progress", "--seed", "1"]
     assert collect.main(argv) == 0
     data = load_offline_dataset(out / "invertedpendulum" / "random-v0")
