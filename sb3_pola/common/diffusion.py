@@ -7,6 +7,7 @@ so it moves with ``.to(device)`` and is rebuilt, not loaded, from its two hyperp
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch as th
 from torch import nn
@@ -32,7 +33,7 @@ def cosine_beta_schedule(n_steps: int, s: float = 0.008) -> th.Tensor:
     return th.clip(1 - alphas_cumprod[1:] / alphas_cumprod[:-1], 0.0, 0.999)
 
 
-BETA_SCHEDULES = {"vp": vp_beta_schedule, "linear": linear_beta_schedule, "cosine": cosine_beta_schedule}
+BETA_SCHEDULES: dict[str, Callable[[int], th.Tensor]] = {"vp": vp_beta_schedule, "linear": linear_beta_schedule, "cosine": cosine_beta_schedule}
 
 
 class NoiseSchedule(nn.Module):

@@ -95,7 +95,8 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         if isinstance(dataset, OfflineDataset):
             data = dataset
         elif dataset is not None:
-            data = load_offline_dataset(dataset, env=env if not isinstance(env, str) else None, download=download)
+            # a VecEnv has the same spaces as its envs, which is all the check reads
+            data = load_offline_dataset(dataset, env=None if isinstance(env, str) else env, download=download)  # type: ignore[arg-type]
             if env is None:
                 env = self._env_from_dataset(data, verbose)
         super().__init__(

@@ -67,6 +67,8 @@ class SinusoidalPosEmb(nn.Module):
     :param dim: embedding size (even)
     """
 
+    freqs: th.Tensor
+
     def __init__(self, dim: int) -> None:
         super().__init__()
         if dim % 2 != 0:
@@ -101,6 +103,11 @@ class StateProductsExtractor(BaseFeaturesExtractor):
     :param observation_space: a flat ``Box``
     :param use_state_products: append the products (``False`` gives the normalised state alone)
     """
+
+    obs_mean: th.Tensor
+    obs_std: th.Tensor
+    idx_i: th.Tensor
+    idx_j: th.Tensor
 
     def __init__(self, observation_space: gym.spaces.Box, use_state_products: bool = True) -> None:
         n = int(math.prod(observation_space.shape))

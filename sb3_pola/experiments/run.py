@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     eval_env.seed(args.seed + 1000)
 
     def score(returns: Any) -> float:
-        value = model.normalized_score(returns)
+        value = model.normalized_score(np.asarray(returns))
         return float("nan") if value is None else value
 
     # the untrained policy: the curve's starting point
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
 
     steps = [0, *[int(t) for t in callback.evaluations_timesteps], args.steps]
     curve_returns = [float(np.mean(init_returns)), *[float(np.mean(r)) for r in callback.evaluations_results], float(np.mean(final_returns))]
-    has_score = model.normalized_score(final_returns) is not None
+    has_score = model.normalized_score(np.asarray(final_returns)) is not None
     curve = [score(r) for r in curve_returns] if has_score else curve_returns
     plot_curve(
         out / "learning_curve.png",
@@ -154,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         "initial_return": float(np.mean(init_returns)),
         "mean_return": float(np.mean(final_returns)),
         "std_return": float(np.std(final_returns)),
-        "normalized_score": model.normalized_score(final_returns),
+        "normalized_score": model.normalized_score(np.asarray(final_returns)),
         "dataset_average_return": dataset_return,
         "dataset_normalized_score": dataset_score,
         "dynamics_fit": model.dynamics_fit_info,

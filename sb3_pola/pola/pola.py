@@ -183,7 +183,7 @@ class POLA(OfflineAlgorithm):
         if self.rollout_length > 0:
             # a learned termination head stands in for the env's rule where none is known
             dynamics_kwargs = {"learn_termination": self._termination_fn is None, **self.dynamics_kwargs}
-        self.policy = self.policy_class(
+        self.policy = self.policy_class(  # type: ignore[assignment]
             self.observation_space,
             self.action_space,
             self.lr_schedule,
@@ -265,7 +265,7 @@ class POLA(OfflineAlgorithm):
         # actor: L_d + eta * L_q (eq. 6 and eq. 3/4)
         features = policy.actor_features(obs)
         bc_loss = self.actor.loss(actions, features)
-        stats = {}
+        stats: dict[str, th.Tensor] = {}
         if self.eta != 0:
             q_loss, stats = self._lookahead_q_loss(obs, features)
             actor_loss = bc_loss + self.eta * q_loss

@@ -16,6 +16,7 @@ from torch.nn import functional as F
 
 from sb3_pola.common.activations import fused_activation
 from sb3_pola.common.diffusion import NoiseSchedule
+from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.torch_layers import SinusoidalPosEmb, StateProductsExtractor, vectorized_mlp
 
 
@@ -34,6 +35,8 @@ class DiffusionActor(nn.Module):
     :param time_embedding_dim: size of the sinusoidal time embedding
     :param activation_fn: activation (Mish in Diffusion-QL)
     """
+
+    optimizer: th.optim.Optimizer
 
     def __init__(
         self,
@@ -174,6 +177,8 @@ class EnsembleCritic(nn.Module):
     :param activation_fn: activation
     """
 
+    optimizer: th.optim.Optimizer
+
     def __init__(
         self,
         features_extractor: StateProductsExtractor,
@@ -225,6 +230,7 @@ class POLAPolicy(BasePolicy):
 
     actor: DiffusionActor
     actor_ema: DiffusionActor
+    dynamics_fitted: th.Tensor
     critic: EnsembleCritic
     critic_target: EnsembleCritic
 
@@ -303,16 +309,14 @@ class POLAPolicy(BasePolicy):
         self.critic_target.train(False)
         self.actor_ema.train(False)
 
-        self.dynamics: nn.Module | None = None
+        self.dynamics: EnsembleDynamics | None = None
         if dynamics_kwargs is not None:
-            from sb3_pola.common.dynamics import EnsembleDynamics
-
             self.dynamics = EnsembleDynamics(obs_dim, action_dim, **dynamics_kwargs)
         # whether the dynamics model has been fitted; a buffer so it travels with the weights
         self.register_buffer("dynamics_fitted", th.zeros((), dtype=th.bool))
 
-        self.actor.optimizer = self.optimizer_class(self.actor.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
-        self.critic.optimizer = self.optimizer_class(self.critic.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+        self.actor.optimizer = self.optimizer_class(self.actor.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+        self.critic.optimizer = self.optimizer_class(self.critic.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
