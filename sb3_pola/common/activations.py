@@ -17,6 +17,7 @@ from typing import Any
 import torch as th
 from torch import nn
 from torch.nn import functional as F
+from torch.utils._python_dispatch import _get_current_dispatch_mode
 
 # e^x (e^x + 2) overflows float32 beyond x ~ 44; from x = 20 on, n / (n + 2) == 1 in float32
 _EXP_CLAMP = 20.0
@@ -39,7 +40,9 @@ _failed = False
 def compiled_mish(x: th.Tensor) -> th.Tensor:
     """Mish through a fused kernel compiled once (dynamic shapes); ``F.mish`` if compilation fails."""
     global _compiled, _failed
-    if _failed or x.numel() < MIN_COMPILED_NUMEL:
+    # eager for small tensors, and under a dispatch mode (FLOP counters, profilers' modes), which would make
+    # dynamo recompile for every mode until its cache limit, after which it runs mish_exp unfused
+    if _failed or x.numel() < MIN_COMPILED_NUMEL or _get_current_dispatch_mode() is not None:
         return F.mish(x)
     if _compiled is None:
         _compiled = th.compile(mish_exp, dynamic=True)
