@@ -400,9 +400,11 @@ def main(argv: list[str] | None = None) -> int:
     if not isinstance(env.action_space, gym.spaces.Box):
         print(f"{args.env} has action space {env.action_space}: continuous (Box) actions are needed", file=sys.stderr)
         return 2
-    out_root = pathlib.Path(
-        args.out or os.environ.get("MINARI_DATASETS_PATH") or pathlib.Path.home() / ".minari" / "datasets"
-    ).expanduser().resolve()  # minari mangles relative dataset paths (get_size joins them twice)
+    out_root = (
+        pathlib.Path(args.out or os.environ.get("MINARI_DATASETS_PATH") or pathlib.Path.home() / ".minari" / "datasets")
+        .expanduser()
+        .resolve()
+    )  # minari mangles relative dataset paths (get_size joins them twice)
     name = args.name or default_name(args.env)
     kinds = list(dict.fromkeys(args.kind))
     progress = not args.no_progress
