@@ -9,7 +9,7 @@ TORCH_SPEC ?= torch==2.13.0
 TORCH_INDEX ?=
 STAMP := $(VENV)/.installed
 
-DATASET ?= pendulum/medium-v0
+DATASET ?= invertedpendulum/medium-v0
 STEPS ?= 6000
 SEED ?= 0
 OUT ?= outputs/main
@@ -33,10 +33,10 @@ train: $(STAMP)
 	$(PY) -m sb3_pola.cli run --dataset $(DATASET) --steps $(STEPS) --seed $(SEED) --out $(OUT)
 
 test: $(STAMP)
-	$(PY) -m pytest tests -n 2 -m "not slow" --timeout 600 $(PYTEST_ARGS)
+	OMP_NUM_THREADS=1 $(PY) -m pytest tests -n 2 -m "not slow" --timeout 600 $(PYTEST_ARGS)
 
 test-all: $(STAMP)
-	$(PY) -m pytest tests -n 2 --timeout 1800 $(PYTEST_ARGS)
+	OMP_NUM_THREADS=1 $(PY) -m pytest tests -n 2 --timeout 1800 $(PYTEST_ARGS)
 
 lint: $(STAMP)
 	$(PY) -m ruff check sb3_pola tests
