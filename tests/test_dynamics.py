@@ -10,7 +10,7 @@ import pytest
 import torch as th
 import torch.nn.functional as F
 
-from sb3_pola.common.dynamics import EnsembleDynamics
+from sb3_pola.common.dynamics import EnsembleDynamics, _split_statistics
 from sb3_pola.common.torch_layers import VectorizedLinear
 
 OBS_DIM, ACT_DIM = 5, 2
@@ -124,6 +124,46 @@ def test_fit_is_reproducible_with_seed() -> None:
         states.append(model.state_dict())
     for key in states[0]:
         th.testing.assert_close(states[0][key], states[1][key], rtol=0, atol=0)
+
+
+def test_split_statistics_match_materialised_split() -> None:
+    gen = th.Generator().manual_seed(0)
+    n = 1000
+    obs = th.randn(n, OBS_DIM, generator=gen) * 5 + 100  # large offset: a naive sum-of-squares std would lose it
+    obs[:, 1] = 3.0  # constant column: std 1
+    act = th.rand(n, ACT_DIM, generator=gen)
+    next_obs = obs + 0.01 * th.randn(n, OBS_DIM, generator=gen)
+    rew = th.randn(n, 1, generator=gen)
+    rows = th.randperm(n, generator=gen, dtype=th.int32)[100:]
+    x = th.cat((obs, act), dim=-1)[rows.long()].double()
+    y = th.cat((next_obs - obs, rew), dim=-1)[rows.long()].double()
+    for chunk_size in (1, 7, 900, 4096):  # merging of uneven chunks, and a single chunk
+        in_mean, in_std, t_mean, t_std = _split_statistics(obs, act, next_obs, rew, rows, chunk_size=chunk_size)
+        assert all(t.dtype == th.float32 for t in (in_mean, in_std, t_mean, t_std))
+        th.testing.assert_close(in_mean, x.mean(0).float())
+        th.testing.assert_close(t_mean, y.mean(0).float())
+        expected_in_std = x.std(0).float()
+        expected_in_std[1] = 1.0
+        th.testing.assert_close(in_std, expected_in_std)
+        th.testing.assert_close(t_std, y.std(0).float())
+    # one row: no spread to measure
+    _, in_std, _, t_std = _split_statistics(obs, act, next_obs, rew, rows[:1])
+    assert (in_std == 1).all() and (t_std == 1).all()
+
+
+def test_fit_leaves_caller_tensors_untouched() -> None:
+    data = _synthetic(700, nonlinear=True)
+    data["rew"] = data["rew"].reshape(-1, 1)  # [N, 1] views, as the replay buffer passes them
+    data["done"] = data["done"].reshape(-1, 1)
+    before = {k: v.clone() for k, v in data.items()}
+    th.manual_seed(0)
+    model = _small(learn_termination=True)
+    model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=2, batch_size=64)
+    for key, value in data.items():
+        assert th.equal(value, before[key]), key
+    # the statistics are those of the training split: close to those of the whole data set
+    th.testing.assert_close(model.obs_mean, data["obs"].mean(0), atol=0.1, rtol=0)
+    th.testing.assert_close(model.target_std[-1], data["rew"].std(), atol=0.1, rtol=0.1)
 
 
 def test_early_stopping_and_epoch_cap() -> None:

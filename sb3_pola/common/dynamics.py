@@ -50,10 +50,48 @@ def default_weight_decays(n_layers: int) -> tuple[float, ...]:
     return (*(hidden[min(i, len(hidden) - 1)] for i in range(n_layers)), DEFAULT_WEIGHT_DECAYS[-1])
 
 
-def _safe_std(x: th.Tensor) -> th.Tensor:
-    """Column std of ``[N, d]``, with 1 for (near-)constant columns."""
-    std = x.std(dim=0) if x.shape[0] > 1 else th.ones(x.shape[1], device=x.device)
-    return th.where(std < 1e-6, th.ones_like(std), std)
+def _split_statistics(
+    obs: th.Tensor, act: th.Tensor, next_obs: th.Tensor, rew: th.Tensor, rows: th.Tensor, chunk_size: int = 4096
+) -> tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]:
+    """Column mean and std of the inputs ``[s, a]`` and the targets ``[s' - s, r]`` over the transitions ``rows``.
+
+    The std is the unbiased one, with 1 for (near-)constant columns and for a single row. The split is gathered
+    chunk by chunk (never copied whole); the chunks' float32 moments are merged in float64 with Chan et al.'s
+    pairwise update, so the result equals the float32 statistics of the materialised split up to rounding.
+
+    :param obs: ``[N, obs_dim]``
+    :param act: ``[N, action_dim]``
+    :param next_obs: ``[N, obs_dim]``
+    :param rew: ``[N, 1]``
+    :param rows: indices of the split ``[M]``
+    :param chunk_size: rows gathered at a time (small: large temporaries of a loop leave glibc's heap grown)
+    :return: input mean and std ``[obs_dim + action_dim]``, target mean and std ``[obs_dim + 1]`` (float32)
+    """
+    n_in = obs.shape[1] + act.shape[1]
+    count = 0
+    mean = th.zeros(n_in + obs.shape[1] + 1, dtype=th.float64, device=obs.device)
+    m2 = th.zeros_like(mean)  # sum of squared deviations from the mean
+    for start in range(0, rows.shape[0], chunk_size):
+        idx = rows[start : start + chunk_size]
+        obs_rows = obs.index_select(0, idx)
+        chunk = th.cat(
+            (obs_rows, act.index_select(0, idx), next_obs.index_select(0, idx) - obs_rows, rew.index_select(0, idx)), dim=-1
+        )  # [c, in + D]
+        c = chunk.shape[0]
+        c_var, c_mean_32 = th.var_mean(chunk, dim=0, correction=0)
+        c_mean, c_m2 = c_mean_32.double(), c_var.double() * c
+        delta = c_mean - mean
+        total = count + c
+        mean = mean + delta * (c / total)
+        m2 = m2 + c_m2 + delta**2 * (count * c / total)
+        count = total
+    if count > 1:
+        std = (m2 / (count - 1)).sqrt().float()
+        std = th.where(std < 1e-6, th.ones_like(std), std)
+    else:
+        std = th.ones_like(mean, dtype=th.float32)
+    mean = mean.float()
+    return mean[:n_in], std[:n_in], mean[n_in:], std[n_in:]
 
 
 class EnsembleDynamics(nn.Module):
@@ -273,6 +311,9 @@ class EnsembleDynamics(nn.Module):
         improved by more than 1% keeps a snapshot of its weights, and training stops after ``patience``
         epochs without such an improvement of any member (or at ``max_epochs`` / ``max_steps``). Each member
         ends with its best weights; the ``n_elites`` best holdout members become the elites.
+        Memory: the data are not copied (float32 tensors on the model's device are used as they are); the fit keeps
+        index tensors (int32 split permutation and ``[E, N]`` bootstrap) and gathers and standardises each minibatch
+        from the caller's tensors, which it never modifies.
         All randomness comes from torch's global RNG: ``th.manual_seed`` makes a fit reproducible.
         ``fit`` makes the parameters trainable again (undoes :meth:`freeze`) and leaves the model in eval mode.
 
@@ -313,20 +354,18 @@ class EnsembleDynamics(nn.Module):
         rew = as_tensor(rewards).reshape(n, 1)
         done_all = as_tensor(dones).reshape(n) if (self.learn_termination and dones is not None) else None
 
-        # Holdout split; with no room for one, evaluate on (part of) the training data.
+        # Holdout split; with no room for one, evaluate on (part of) the training data. Only indices are
+        # kept (int32 where they fit: same draws as int64): minibatches are gathered from the caller's tensors.
         n_holdout = min(int(n * holdout_ratio), max_holdout)
         if n - n_holdout < 1:
             raise ValueError(f"not enough transitions to fit ({n})")
-        perm = th.randperm(n, device=device)
-        hold_idx, train_idx = perm[:n_holdout], perm[n_holdout:]
+        index_dtype = th.int32 if n <= th.iinfo(th.int32).max else th.long
+        perm = th.randperm(n, device=device, dtype=index_dtype)
+        hold_idx, train_idx = perm[:n_holdout].long(), perm[n_holdout:]  # train_idx: a view, no copy
         if n_holdout == 0:
-            hold_idx = train_idx[:max_holdout]
+            hold_idx = train_idx[:max_holdout].long()
 
-        inputs = th.cat((obs, act), dim=-1)  # [N, in]
-        targets = th.cat((next_obs - obs, rew), dim=-1)  # [N, D]
-        x_train, y_train = inputs[train_idx], targets[train_idx]
-        in_mean, in_std = x_train.mean(dim=0), _safe_std(x_train)
-        t_mean, t_std = y_train.mean(dim=0), _safe_std(y_train)
+        in_mean, in_std, t_mean, t_std = _split_statistics(obs, act, next_obs, rew, train_idx)
         with th.no_grad():
             self.obs_mean.copy_(in_mean[: self.obs_dim])
             self.obs_std.copy_(in_std[: self.obs_dim])
@@ -334,21 +373,25 @@ class EnsembleDynamics(nn.Module):
             self.act_std.copy_(in_std[self.obs_dim :])
             self.target_mean.copy_(t_mean)
             self.target_std.copy_(t_std)
-        x_train = (x_train - in_mean) / in_std
-        y_train = (y_train - t_mean) / t_std
-        x_hold = (inputs[hold_idx] - in_mean) / in_std  # [H, in]
-        y_hold = (targets[hold_idx] - t_mean) / t_std  # [H, D]
-        d_train = done_all[train_idx] if done_all is not None else None
-        d_hold = done_all[hold_idx] if done_all is not None else None
-        no_change_mse = float(((targets[hold_idx, : self.obs_dim]) ** 2).mean())
-        del inputs, targets
 
-        n_train = x_train.shape[0]
+        def gather(rows: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+            """Standardised inputs ``[..., in]`` and targets ``[..., D]`` of the transitions ``rows``."""
+            obs_rows = obs[rows]
+            x = (th.cat((obs_rows, act[rows]), dim=-1) - in_mean) / in_std
+            y = (th.cat((next_obs[rows] - obs_rows, rew[rows]), dim=-1) - t_mean) / t_std
+            return x, y
+
+        x_hold, y_hold = gather(hold_idx)  # [H, in], [H, D]
+        d_hold = done_all[hold_idx] if done_all is not None else None
+        no_change_mse = float(((next_obs[hold_idx] - obs[hold_idx]) ** 2).mean())
+
+        n_train = train_idx.shape[0]
         steps_per_pass = math.ceil(n_train / batch_size)
         steps_per_epoch = steps_per_pass if max_epoch_steps is None else max(1, min(steps_per_pass, max_epoch_steps))
-        # Bootstrap resample per member, fixed for the fit: [E, N_train] indices into the training split.
-        bootstrap = th.randint(n_train, (self.n_members, n_train), device=device)
-        order = bootstrap
+        # Bootstrap resample per member, fixed for the fit: [E, N_train] indices into the training split
+        # (drawn in place in the index dtype: the same values as th.randint's int64).
+        bootstrap = th.empty((self.n_members, n_train), dtype=index_dtype, device=device).random_(0, n_train)
+        pass_perm = th.empty(0, dtype=index_dtype, device=device)
         cursor = steps_per_pass  # forces a shuffle at the first step
 
         self.requires_grad_(True)
@@ -372,12 +415,14 @@ class EnsembleDynamics(nn.Module):
             for _ in range(n_steps):
                 if cursor >= steps_per_pass:
                     # New pass: one column permutation shuffles every member's (independent) resample.
-                    order = bootstrap[:, th.randperm(n_train, device=device)]
+                    pass_perm = th.randperm(n_train, device=device, dtype=index_dtype)
                     cursor = 0
-                idx = order[:, cursor * batch_size : (cursor + 1) * batch_size]  # [E, b]
+                cols = pass_perm[cursor * batch_size : (cursor + 1) * batch_size]  # [b]
+                rows = train_idx[bootstrap[:, cols].long()].long()  # [E, b] transitions
                 cursor += 1
-                mean, logvar, logit = self._forward(x_train[idx])  # [E, b, in] -> [E, b, D]
-                loss = self._loss(mean, logvar, logit, y_train[idx], d_train[idx] if d_train is not None else None)
+                x, y = gather(rows)  # [E, b, in], [E, b, D]
+                mean, logvar, logit = self._forward(x)  # [E, b, D]
+                loss = self._loss(mean, logvar, logit, y, done_all[rows] if done_all is not None else None)
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 optimizer.step()
