@@ -178,3 +178,22 @@ def test_normalized_score_from_reference_scores(pendulum_path):
     assert model.normalized_score([0.0, 100.0]) == pytest.approx(75.0)
     model.ref_min_score = None
     assert model.normalized_score([1.0]) is None
+
+
+def test_deterministic_sample_is_the_noise_free_chain(pendulum_path):
+    # eq. 5 with z = 0 from a_T = 0: no fixed noise draw that would bias every action the same way
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs())
+    actor = model.policy.actor_ema
+    obs = th.randn(6, 3)
+    features = model.policy.actor_features(obs)
+    with th.no_grad():
+        x = th.zeros(6, actor.action_dim)
+        for t in reversed(range(actor.n_diffusion_steps)):
+            x = actor.schedule.step(actor.predict_noise(x, th.full((6,), t), features), t, x, None)
+        expected = x.clamp(-1, 1)
+        assert th.allclose(actor.sample(features, deterministic=True), expected, atol=1e-5)
+    # and the autograd path gives the same numbers
+    assert th.allclose(actor.sample(features, deterministic=True).detach(), expected, atol=1e-5)
+    # predict(deterministic=True) is that action, rescaled to the env's bounds
+    action, _ = model.predict(obs.numpy(), deterministic=True)
+    assert np.allclose(action, model.policy.unscale_action(expected.numpy()), atol=1e-4)
