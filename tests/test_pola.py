@@ -118,10 +118,10 @@ def test_normalisation_statistics_come_from_the_dataset(pendulum_path):
 def test_ema_copies_then_averages(pendulum_path):
     model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(ema_start=10, ema_update_freq=5))
     model.learn(5)  # step 5 < ema_start: a copy
-    for p, q in zip(model.actor.parameters(), model.policy.actor_ema.parameters()):
+    for p, q in zip(model.actor.parameters(), model.policy.actor_ema.parameters(), strict=True):
         assert th.equal(p, q)
     model.learn(10, reset_num_timesteps=False)  # step 15: an average, behind the actor
-    assert any(not th.equal(p, q) for p, q in zip(model.actor.parameters(), model.policy.actor_ema.parameters()))
+    assert any(not th.equal(p, q) for p, q in zip(model.actor.parameters(), model.policy.actor_ema.parameters(), strict=True))
 
 
 def test_eta_zero_is_behaviour_cloning(pendulum_path):
@@ -148,7 +148,14 @@ def test_logger_tensorboard_and_callbacks(pendulum_path, tmp_path):
     acc = EventAccumulator(str(event_files[0].parent))
     acc.Reload()
     tags = set(acc.Tags()["scalars"])
-    for key in ["train/critic_loss", "train/actor_loss", "train/bc_loss", "train/q_loss", "train/lookahead_q_2", "eval/mean_reward"]:
+    for key in [
+        "train/critic_loss",
+        "train/actor_loss",
+        "train/bc_loss",
+        "train/q_loss",
+        "train/lookahead_q_2",
+        "eval/mean_reward",
+    ]:
         assert key in tags, f"{key} missing from {sorted(tags)}"
 
 

@@ -33,7 +33,11 @@ def cosine_beta_schedule(n_steps: int, s: float = 0.008) -> th.Tensor:
     return th.clip(1 - alphas_cumprod[1:] / alphas_cumprod[:-1], 0.0, 0.999)
 
 
-BETA_SCHEDULES: dict[str, Callable[[int], th.Tensor]] = {"vp": vp_beta_schedule, "linear": linear_beta_schedule, "cosine": cosine_beta_schedule}
+BETA_SCHEDULES: dict[str, Callable[[int], th.Tensor]] = {
+    "vp": vp_beta_schedule,
+    "linear": linear_beta_schedule,
+    "cosine": cosine_beta_schedule,
+}
 
 
 class NoiseSchedule(nn.Module):
@@ -105,11 +109,17 @@ class NoiseSchedule(nn.Module):
 
     def add_noise(self, x0: th.Tensor, noise: th.Tensor, t: th.Tensor | int) -> th.Tensor:
         """Forward process ``x_t = sqrt(abar_t) x_0 + sqrt(1 - abar_t) eps`` (the argument of eq. 2 / 6)."""
-        return self._at(self.sqrt_alphas_cumprod, t, x0.ndim) * x0 + self._at(self.sqrt_one_minus_alphas_cumprod, t, x0.ndim) * noise
+        return (
+            self._at(self.sqrt_alphas_cumprod, t, x0.ndim) * x0
+            + self._at(self.sqrt_one_minus_alphas_cumprod, t, x0.ndim) * noise
+        )
 
     def predict_start_from_noise(self, x_t: th.Tensor, t: th.Tensor | int, noise: th.Tensor) -> th.Tensor:
         """Invert the forward process: ``x_0 = x_t / sqrt(abar_t) - sqrt(1/abar_t - 1) eps``."""
-        return self._at(self.sqrt_recip_alphas_cumprod, t, x_t.ndim) * x_t - self._at(self.sqrt_recipm1_alphas_cumprod, t, x_t.ndim) * noise
+        return (
+            self._at(self.sqrt_recip_alphas_cumprod, t, x_t.ndim) * x_t
+            - self._at(self.sqrt_recipm1_alphas_cumprod, t, x_t.ndim) * noise
+        )
 
     def q_posterior(self, x0: th.Tensor, x_t: th.Tensor, t: th.Tensor | int) -> tuple[th.Tensor, th.Tensor]:
         """Mean and log-variance of ``q(x_{t-1} | x_t, x_0)`` (eq. 1)."""

@@ -35,7 +35,9 @@ DEFAULT_DATASET = "invertedpendulum/medium-v0"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="sb3-pola run", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="sb3-pola run", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--dataset", default=DEFAULT_DATASET, help="Minari dataset id or path (default: the shipped one)")
     parser.add_argument("--steps", type=int, default=6000, help="gradient steps")
     parser.add_argument("--seed", type=int, default=0)
@@ -50,7 +52,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def plot_curve(path: pathlib.Path, steps: list[int], scores: list[float], label: str, reference: float | None, title: str) -> None:
+def plot_curve(
+    path: pathlib.Path, steps: list[int], scores: list[float], label: str, reference: float | None, title: str
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -100,7 +104,9 @@ def main(argv: list[str] | None = None) -> int:
 
     # the untrained policy: the curve's starting point
     eval_time = time.perf_counter()
-    init_returns, _ = evaluate_policy(model, eval_env, n_eval_episodes=args.eval_episodes, deterministic=True, return_episode_rewards=True)
+    init_returns, _ = evaluate_policy(
+        model, eval_env, n_eval_episodes=args.eval_episodes, deterministic=True, return_episode_rewards=True
+    )
     eval_seconds = time.perf_counter() - eval_time
 
     class TimedEval(NormalizedScoreEvalCallback):
@@ -122,12 +128,18 @@ def main(argv: list[str] | None = None) -> int:
     train_seconds = learn_seconds - TimedEval.eval_seconds - fit_seconds
 
     eval_time = time.perf_counter()
-    final_returns, _ = evaluate_policy(model, eval_env, n_eval_episodes=args.final_episodes, deterministic=True, return_episode_rewards=True)
+    final_returns, _ = evaluate_policy(
+        model, eval_env, n_eval_episodes=args.final_episodes, deterministic=True, return_episode_rewards=True
+    )
     eval_seconds += time.perf_counter() - eval_time
     model.save(out / "model.zip")
 
     steps = [0, *[int(t) for t in callback.evaluations_timesteps], args.steps]
-    curve_returns = [float(np.mean(init_returns)), *[float(np.mean(r)) for r in callback.evaluations_results], float(np.mean(final_returns))]
+    curve_returns = [
+        float(np.mean(init_returns)),
+        *[float(np.mean(r)) for r in callback.evaluations_results],
+        float(np.mean(final_returns)),
+    ]
     has_score = model.normalized_score(np.asarray(final_returns)) is not None
     curve = [score(r) for r in curve_returns] if has_score else curve_returns
     plot_curve(

@@ -24,9 +24,7 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
         th._foreach_lerp_(list(target_params), list(params), tau)
 
 
-def lookahead_q_objective(
-    q: th.Tensor, alive: th.Tensor, gamma_powers: th.Tensor, top_k: int
-) -> tuple[th.Tensor, th.Tensor]:
+def lookahead_q_objective(q: th.Tensor, alive: th.Tensor, gamma_powers: th.Tensor, top_k: int) -> tuple[th.Tensor, th.Tensor]:
     """``L_q`` of eq. 4 from the ensemble's Q-values along the look-ahead.
 
     :param q: ``[N, T+1, B]`` Q-values of every member at ``(s_{t+i}, a_{t+i})``
@@ -209,7 +207,15 @@ class POLA(OfflineAlgorithm):
         self.critic_target = self.policy.critic_target
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "actor", "critic", "critic_target", "_termination_fn", "_stat_sums", "_gamma_powers"]
+        return [
+            *super()._excluded_save_params(),
+            "actor",
+            "critic",
+            "critic_target",
+            "_termination_fn",
+            "_stat_sums",
+            "_gamma_powers",
+        ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "actor.optimizer", "critic.optimizer"], []
@@ -322,7 +328,9 @@ class POLA(OfflineAlgorithm):
         q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
         self.critic.requires_grad_(True)
         alive_mask = th.stack(alive)  # [T+1, B]
-        q_loss, per_step = lookahead_q_objective(q.view(-1, horizon + 1, batch_size), alive_mask, self._gamma_powers, self.top_k)
+        q_loss, per_step = lookahead_q_objective(
+            q.view(-1, horizon + 1, batch_size), alive_mask, self._gamma_powers, self.top_k
+        )
         stats = {f"lookahead_q_{i}": per_step[i].detach() for i in range(horizon + 1)}
         stats["lookahead_alive"] = alive_mask[-1].mean()
         return q_loss, stats
@@ -337,7 +345,7 @@ class POLA(OfflineAlgorithm):
         if self._stat_count == 0:
             return
         values = th.stack(list(self._stat_sums.values())).cpu().numpy() / self._stat_count  # one host sync per dump
-        for key, value in zip(self._stat_sums, values):
+        for key, value in zip(self._stat_sums, values, strict=True):
             self.logger.record(f"train/{key}", float(value))
         self._stat_sums, self._stat_count = {}, 0
 

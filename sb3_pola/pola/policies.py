@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import itertools
 from typing import Any
 
 import numpy as np
@@ -61,7 +62,7 @@ class DiffusionActor(nn.Module):
         )
         self.input_layer = nn.Linear(action_dim + time_embedding_dim + features_dim, net_arch[0])
         layers: list[nn.Module] = [activation_fn()]
-        for in_size, out_size in zip(net_arch[:-1], net_arch[1:]):
+        for in_size, out_size in itertools.pairwise(net_arch):
             layers += [nn.Linear(in_size, out_size), activation_fn()]
         layers.append(nn.Linear(net_arch[-1], action_dim))
         self.trunk = nn.Sequential(*layers)
@@ -205,7 +206,7 @@ class EnsembleCritic(nn.Module):
 
 
 class POLAPolicy(BasePolicy):
-    """Policy of POLA: diffusion actor on ``s_new`` (state + pairwise products), its EMA copy, and the critic ensemble with targets.
+    """Policy of POLA: diffusion actor on ``s_new`` (state + products), its EMA copy, critic ensemble and targets.
 
     ``predict`` uses the EMA actor (as Diffusion-QL evaluates). With ``n_action_samples > 1``
     it draws that many candidate actions per state and keeps the one with the highest
