@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import pathlib
 import warnings
@@ -10,12 +11,23 @@ import gymnasium as gym
 import numpy as np
 
 
-def record_random_dataset(root: pathlib.Path, dataset_id: str, env_id: str, n_steps: int, seed: int = 0) -> pathlib.Path:
-    """Roll out uniform random actions in ``env_id`` for ``n_steps`` and write a Minari dataset (with its env spec)."""
+def record_random_dataset(
+    root: pathlib.Path,
+    dataset_id: str,
+    env_id: str,
+    n_steps: int,
+    seed: int = 0,
+    ref_scores: tuple[float, float] | None = None,
+    max_episode_steps: int | None = None,
+) -> pathlib.Path:
+    """Roll out uniform random actions in ``env_id`` for ``n_steps`` and write a Minari dataset (with its env spec).
+
+    ``ref_scores`` (min, max) are written into the metadata as Minari would for a known env.
+    """
     import minari
     from minari.data_collector import EpisodeBuffer
 
-    env = gym.make(env_id)
+    env = gym.make(env_id, max_episode_steps=max_episode_steps)
     env.action_space.seed(seed)
     buffers, steps, episode = [], 0, 0
     while steps < n_steps:
@@ -58,6 +70,11 @@ def record_random_dataset(root: pathlib.Path, dataset_id: str, env_id: str, n_st
         else:
             os.environ["MINARI_DATASETS_PATH"] = old
     env.close()
+    if ref_scores is not None:
+        metadata_file = root / dataset_id / "data" / "metadata.json"
+        metadata = json.loads(metadata_file.read_text())
+        metadata.update(ref_min_score=ref_scores[0], ref_max_score=ref_scores[1])
+        metadata_file.write_text(json.dumps(metadata))
     return root / dataset_id
 
 

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import json
 import pathlib
-import warnings
 
-import gymnasium as gym
 import numpy as np
 import pytest
+from pola_data import record_random_dataset
 
 from sb3_pola.experiments import score
 
@@ -27,53 +26,8 @@ TINY += ["--preset", "cpu", "--device", "cpu", "-v", "0"]
 @pytest.fixture(scope="module")
 def pendulum_root(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
     """A Minari dataset ``test/pendulum-v0``: 2 random episodes of Pendulum-v1, truncated to 30 steps."""
-    import minari
-    from minari.data_collector import EpisodeBuffer
-
     root = tmp_path_factory.mktemp("score_data")
-    env = gym.make("Pendulum-v1", max_episode_steps=30)
-    rng = np.random.default_rng(0)
-    buffers = []
-    for ep in range(2):
-        obs, _ = env.reset(seed=ep)
-        observations, actions, rewards = [obs], [], []
-        for _ in range(30):
-            action = rng.uniform(-2, 2, size=1).astype(np.float32)
-            obs, reward, *_ = env.step(action)
-            observations.append(obs)
-            actions.append(action)
-            rewards.append(reward)
-        truncations = np.zeros(30, dtype=bool)
-        truncations[-1] = True
-        buffers.append(
-            EpisodeBuffer(
-                id=ep,
-                observations=np.array(observations),
-                actions=np.array(actions),
-                rewards=np.array(rewards),
-                terminations=np.zeros(30, dtype=bool),
-                truncations=truncations,
-            )
-        )
-    import os
-
-    old = os.environ.get("MINARI_DATASETS_PATH")
-    os.environ["MINARI_DATASETS_PATH"] = str(root)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            minari.create_dataset_from_buffers(
-                dataset_id="test/pendulum-v0", buffer=buffers, env=env, algorithm_name="random", data_format="hdf5"
-            )
-    finally:
-        if old is None:
-            os.environ.pop("MINARI_DATASETS_PATH")
-        else:
-            os.environ["MINARI_DATASETS_PATH"] = old
-    meta_file = root / "test/pendulum-v0" / "data" / "metadata.json"
-    meta = json.loads(meta_file.read_text())
-    meta.update(ref_min_score=-300.0, ref_max_score=0.0)
-    meta_file.write_text(json.dumps(meta))
+    record_random_dataset(root, "test/pendulum-v0", "Pendulum-v1", 60, ref_scores=(-300.0, 0.0), max_episode_steps=30)
     return root
 
 

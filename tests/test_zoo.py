@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import pathlib
 import subprocess
 import sys
-import warnings
 
 import gymnasium as gym
 import numpy as np
 import pytest
 import yaml
+from pola_data import record_random_dataset
 
 pytest.importorskip("rl_zoo3")
 pytest.importorskip("optuna")
@@ -38,54 +37,7 @@ LIGHT_PARAMS = [
 
 def write_env_dataset(root: pathlib.Path, dataset_id: str, env_id: str, n_steps: int, seed: int = 0) -> None:
     """A random-action Minari dataset recorded in a real env (so it carries an ``env_spec``), with reference scores."""
-    import minari
-    from minari.data_collector import EpisodeBuffer
-
-    env = gym.make(env_id)
-    rng = np.random.default_rng(seed)
-    buffers, steps, episode = [], 0, 0
-    while steps < n_steps:
-        obs, _ = env.reset(seed=seed + episode)
-        observations, actions, rewards, terms, truncs = [obs], [], [], [], []
-        done = False
-        while not done:
-            action = rng.uniform(env.action_space.low, env.action_space.high).astype(np.float32)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            done = terminated or truncated or steps + len(actions) + 1 >= n_steps
-            observations.append(obs)
-            actions.append(action)
-            rewards.append(reward)
-            terms.append(terminated)
-            truncs.append(done and not terminated)
-        buffers.append(
-            EpisodeBuffer(
-                id=episode,
-                observations=np.array(observations),
-                actions=np.array(actions),
-                rewards=np.array(rewards),
-                terminations=np.array(terms),
-                truncations=np.array(truncs),
-            )
-        )
-        steps += len(actions)
-        episode += 1
-    old = os.environ.get("MINARI_DATASETS_PATH")
-    os.environ["MINARI_DATASETS_PATH"] = str(root)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            minari.create_dataset_from_buffers(
-                dataset_id=dataset_id, buffer=buffers, env=env, algorithm_name="random", data_format="hdf5"
-            )
-    finally:
-        if old is None:
-            os.environ.pop("MINARI_DATASETS_PATH", None)
-        else:
-            os.environ["MINARI_DATASETS_PATH"] = old
-    metadata_file = root / dataset_id / "data" / "metadata.json"
-    metadata = json.loads(metadata_file.read_text())
-    metadata.update(ref_min_score=REF_MIN, ref_max_score=REF_MAX)
-    metadata_file.write_text(json.dumps(metadata))
+    record_random_dataset(root, dataset_id, env_id, n_steps, seed=seed, ref_scores=(REF_MIN, REF_MAX))
 
 
 @pytest.fixture(scope="module")
