@@ -22,7 +22,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.checkpoint import DivergenceError, validate_model_file
-from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env
+from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env, normalized_score
 
 SelfOfflineAlgorithm = TypeVar("SelfOfflineAlgorithm", bound="OfflineAlgorithm")
 
@@ -228,7 +228,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         total_timesteps: int,
         callback: MaybeCallback = None,
         log_interval: int = 1000,
-        tb_log_name: str = "run",
+        tb_log_name: str | None = None,
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> SelfOfflineAlgorithm:
@@ -237,10 +237,11 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         :param total_timesteps: number of gradient steps
         :param callback: SB3 callback(s), called after every gradient step
         :param log_interval: gradient steps between two logger dumps
-        :param tb_log_name: name of the tensorboard run
+        :param tb_log_name: name of the tensorboard run (default: the algorithm's class name)
         :param reset_num_timesteps: start counting from zero (``False`` continues a previous ``learn``)
         :param progress_bar: show a progress bar
         """
+        tb_log_name = tb_log_name or type(self).__name__
         total_timesteps, callback = self._setup_learn(
             total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
         )
@@ -401,6 +402,10 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
                 f"predict got an observation with NaN or inf ({int((~finite).sum())} values, e.g. at index "
                 f"{', '.join(f'{w}: {v}' for w, v in zip(where, values, strict=True))}); the policy's actions would be NaN"
             )
+
+    def normalized_score(self, returns: float | np.ndarray | list[float]) -> float | None:
+        """D4RL score ``100 (R - ref_min) / (ref_max - ref_min)`` of the mean return, from the dataset's metadata."""
+        return normalized_score(returns, self.ref_min_score, self.ref_max_score)
 
     def _record_train_stats(self) -> None:
         """Hook: write the accumulated ``train/*`` statistics to the logger."""

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from typing import Any, ClassVar, TypeVar
 
-import numpy as np
 import torch as th
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.type_aliases import GymEnv, Schedule
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
@@ -348,31 +347,6 @@ class POLA(OfflineAlgorithm):
         for key, value in zip(self._stat_sums, values, strict=True):
             self.logger.record(f"train/{key}", float(value))
         self._stat_sums, self._stat_count = {}, 0
-
-    # ------------------------------------------------------------------ scores
-    def normalized_score(self, returns: float | np.ndarray) -> float | None:
-        """D4RL score ``100 (R - ref_min) / (ref_max - ref_min)`` of the mean return, from the dataset's metadata."""
-        if self.ref_min_score is None or self.ref_max_score is None:
-            return None
-        return float(100.0 * (np.mean(returns) - self.ref_min_score) / (self.ref_max_score - self.ref_min_score))
-
-    def learn(
-        self: SelfPOLA,
-        total_timesteps: int,
-        callback: MaybeCallback = None,
-        log_interval: int = 1000,
-        tb_log_name: str = "POLA",
-        reset_num_timesteps: bool = True,
-        progress_bar: bool = False,
-    ) -> SelfPOLA:
-        return super().learn(
-            total_timesteps=total_timesteps,
-            callback=callback,
-            log_interval=log_interval,
-            tb_log_name=tb_log_name,
-            reset_num_timesteps=reset_num_timesteps,
-            progress_bar=progress_bar,
-        )
 
 
 __all__ = ["POLA", "OfflineReplayBuffer"]
