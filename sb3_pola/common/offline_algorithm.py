@@ -121,6 +121,9 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         )
         self.download = download
         self.dataset = dataset_reference(dataset)
+        # per-step training statistics (losses, Q-values, gradient norms), summed on the device until a dump
+        self._stat_sums: dict[str, th.Tensor] = {}
+        self._stat_count = 0
         self._offline_data = data
         # gradient steps between two NaN/inf checks of losses and parameters (also done at every log dump)
         self.check_finite_freq = 100
@@ -148,7 +151,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
             return None
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_offline_data"]
+        return [*super()._excluded_save_params(), "_offline_data", "_stat_sums", "_stat_count"]
 
     def save_replay_buffer(self, path: Any) -> None:
         """Nothing to save: the replay buffer is the dataset, found again through ``self.dataset``."""
@@ -276,8 +279,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         """
         named: list[tuple[str, str, th.Tensor]] = []
         if not parameters_only:
-            # POLA accumulates its per-step statistics (losses, Q-values, gradient norms) in _stat_sums
-            named += [("losses", key, value) for key, value in getattr(self, "_stat_sums", {}).items()]
+            named += [("losses", key, value) for key, value in self._stat_sums.items()]
         policy = getattr(self, "policy", None)
         if policy is not None:
             named += [("parameters", key, value) for key, value in policy.state_dict().items() if value.is_floating_point()]
@@ -407,8 +409,21 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         """D4RL score ``100 (R - ref_min) / (ref_max - ref_min)`` of the mean return, from the dataset's metadata."""
         return normalized_score(returns, self.ref_min_score, self.ref_max_score)
 
+    def _accumulate_train_stats(self, stats: dict[str, th.Tensor]) -> None:
+        """Add one gradient step's detached statistics; they stay on the device until the next dump."""
+        for key, value in stats.items():
+            self._stat_sums[key] = self._stat_sums[key] + value if key in self._stat_sums else value
+        self._stat_count += 1
+
     def _record_train_stats(self) -> None:
-        """Hook: write the accumulated ``train/*`` statistics to the logger."""
+        """Write the means of the accumulated statistics as ``train/<name>`` (one host sync per dump)."""
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        if self._stat_count == 0:
+            return
+        values = th.stack(list(self._stat_sums.values())).cpu().numpy() / self._stat_count
+        for key, value in zip(self._stat_sums, values, strict=True):
+            self.logger.record(f"train/{key}", float(value))
+        self._stat_sums, self._stat_count = {}, 0
 
     def dump_logs(self) -> None:
         time_elapsed = max((time.time_ns() - self.start_time) / 1e9, sys.float_info.epsilon)

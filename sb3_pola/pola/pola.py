@@ -197,8 +197,6 @@ class POLA(OfflineAlgorithm):
             self.policy.set_normalization(mean, std)
         self._create_aliases()
         self._gamma_powers = th.tensor([self.gamma**i for i in range(self.rollout_length + 1)], device=self.device)
-        self._stat_sums: dict[str, th.Tensor] = {}
-        self._stat_count = 0
 
     def _create_aliases(self) -> None:
         self.actor = self.policy.actor
@@ -212,7 +210,6 @@ class POLA(OfflineAlgorithm):
             "critic",
             "critic_target",
             "_termination_fn",
-            "_stat_sums",
             "_gamma_powers",
         ]
 
@@ -243,11 +240,8 @@ class POLA(OfflineAlgorithm):
         self._update_learning_rate([self.actor.optimizer, self.critic.optimizer])
         buffer = self._setup_offline_data()
         for _ in range(gradient_steps):
-            stats = self._update(buffer.sample(batch_size))
+            self._accumulate_train_stats(self._update(buffer.sample(batch_size)))
             self._n_updates += 1
-            for key, value in stats.items():
-                self._stat_sums[key] = self._stat_sums[key] + value if key in self._stat_sums else value
-            self._stat_count += 1
 
     def _update(self, batch: Any) -> dict[str, th.Tensor]:
         """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics."""
@@ -336,17 +330,8 @@ class POLA(OfflineAlgorithm):
 
     def _clip(self, parameters: Any) -> th.Tensor:
         if self.max_grad_norm is None:
-            return th.zeros(())
+            return th.zeros((), device=self.device)
         return clip_grad_norm_(parameters, self.max_grad_norm)
-
-    def _record_train_stats(self) -> None:
-        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        if self._stat_count == 0:
-            return
-        values = th.stack(list(self._stat_sums.values())).cpu().numpy() / self._stat_count  # one host sync per dump
-        for key, value in zip(self._stat_sums, values, strict=True):
-            self.logger.record(f"train/{key}", float(value))
-        self._stat_sums, self._stat_count = {}, 0
 
 
 __all__ = ["POLA", "OfflineReplayBuffer"]
