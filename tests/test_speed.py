@@ -161,9 +161,26 @@ def test_sample_matches_reference_and_time_cache_follows_updates():
             got = actor.sample(feats, generator=th.Generator().manual_seed(3))
             want = ref_sample(actor, feats, generator=th.Generator().manual_seed(3))
         _close(got, want)
-        with th.no_grad():  # an in-place update (as EMA / load_state_dict do) must invalidate the cached time projection
+        # the no-grad deterministic chain (folded coefficients) == the autograd chain's noise-free path
+        with th.no_grad():
+            fast = actor.sample(feats, deterministic=True)
+        _close(fast, actor.sample(feats, deterministic=True))
+        with th.no_grad():  # an in-place update (as EMA / load_state_dict do) must invalidate the cached weights
             for p in actor.parameters():
                 p.add_(0.05 * th.randn_like(p))
+
+
+def test_inference_cache_after_data_writes():
+    actor = _model().policy.actor_ema
+    feats = th.randn(8, actor.features_dim)
+    with th.no_grad():
+        before = actor.sample(feats, deterministic=True)
+        for p in actor.parameters():
+            p.data.mul_(1.5)  # a write that bumps no version counter: the cache cannot see it
+        actor.clear_inference_cache()
+        after = actor.sample(feats, deterministic=True)
+    assert not th.allclose(before, after)
+    _close(after, actor.sample(feats, deterministic=True))  # the autograd chain uses no cache
 
 
 def test_mish_exp_equals_mish():
