@@ -1,8 +1,9 @@
 """Data-layer benchmark: first (episode-by-episode) and cached load times, and memory.
 
-``python -m sb3_pola.benchmarks.data_bench [--quick]``. Uses the HalfCheetah datasets of
-``$MINARI_DATASETS_PATH`` (or ``--datasets``) when present, and a synthetic Minari dataset of
-1M steps (100k with ``--quick``) written to a temporary folder.
+``python -m sb3_pola.benchmarks.data_bench [--quick]``. Always measures synthetic HalfCheetah-shaped
+Minari datasets written to a temporary folder: 100k and 1M steps (100k only with ``--quick``), so the
+figures exist on any machine. In full mode the HalfCheetah datasets of ``$MINARI_DATASETS_PATH`` (or
+``--datasets``) are measured as extra rows when present.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import json
 import os
 import pathlib
 import resource
+import shutil
 import tempfile
 import time
 import tracemalloc
@@ -118,11 +120,17 @@ def measure(dataset: Any, cache_dir: pathlib.Path) -> dict[str, Any]:
     }
 
 
-def run(quick: bool = False, datasets_path: str | None = None) -> dict[str, Any]:
-    """Run the benchmark; returns ``{name: figures}``.
+def synthetic_sizes(quick: bool) -> tuple[int, ...]:
+    """Steps of the synthetic datasets measured: 100k, and 1M in full mode."""
+    return (100_000,) if quick else (100_000, 1_000_000)
 
-    :param quick: synthetic dataset of 100k steps instead of 1M
-    :param datasets_path: Minari root holding the HalfCheetah datasets (default ``$MINARI_DATASETS_PATH``)
+
+def run(quick: bool = False, datasets_path: str | None = None) -> dict[str, Any]:
+    """Run the benchmark; returns ``{dataset id: figures, ..., "process_maxrss_mb": peak RSS}``.
+
+    :param quick: the synthetic 100k-step dataset only (no 1M, no local datasets)
+    :param datasets_path: Minari root holding the HalfCheetah datasets (default ``$MINARI_DATASETS_PATH``),
+        measured in full mode when present
     """
     results: dict[str, Any] = {}
     old_path = os.environ.get("MINARI_DATASETS_PATH")
@@ -130,18 +138,19 @@ def run(quick: bool = False, datasets_path: str | None = None) -> dict[str, Any]
     with tempfile.TemporaryDirectory(prefix="sb3_pola_bench_") as tmp:
         tmp_path = pathlib.Path(tmp)
         try:
-            if shared:
-                for dataset_id in SHARED[:1] if quick else SHARED:
+            for n_steps in synthetic_sizes(quick):
+                start = time.perf_counter()
+                synthetic = make_synthetic(tmp_path / "minari", n_steps)
+                write_s = time.perf_counter() - start
+                figures = measure(tmp_path / "minari" / synthetic, tmp_path / "cache" / f"synthetic{n_steps}")
+                figures["write_s"] = round(write_s, 1)
+                results[synthetic] = figures
+                shutil.rmtree(tmp_path / "minari" / synthetic, ignore_errors=True)  # 1M steps: ~250 MB of disk
+            if shared and not quick:
+                for dataset_id in SHARED:
                     folder = pathlib.Path(shared) / dataset_id
                     if folder.is_dir():
                         results[dataset_id] = measure(folder, tmp_path / "cache" / dataset_id.replace("/", "_"))
-            n_steps = 100_000 if quick else 1_000_000
-            start = time.perf_counter()
-            synthetic = make_synthetic(tmp_path / "minari", n_steps)
-            write_s = time.perf_counter() - start
-            figures = measure(tmp_path / "minari" / synthetic, tmp_path / "cache" / "synthetic")
-            figures["write_s"] = round(write_s, 1)
-            results[synthetic] = figures
         finally:
             if old_path is None:
                 os.environ.pop("MINARI_DATASETS_PATH", None)
@@ -153,7 +162,7 @@ def run(quick: bool = False, datasets_path: str | None = None) -> dict[str, Any]
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="100k-step synthetic dataset instead of 1M")
+    parser.add_argument("--quick", action="store_true", help="the 100k-step synthetic dataset only")
     parser.add_argument("--datasets", default=None, help="Minari root with the HalfCheetah datasets")
     args = parser.parse_args(argv)
     print(json.dumps(run(args.quick, args.datasets), indent=2))

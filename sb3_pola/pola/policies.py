@@ -182,7 +182,9 @@ class DiffusionActor(nn.Module):
             x = x_new.add_(noise[t], alpha=sigma) if t > 0 else x_new
         return x.clamp(-1.0, 1.0)
 
-    def _sample_no_grad(self, step_bias: th.Tensor, w_action_t: th.Tensor, x: th.Tensor | None, noise: th.Tensor | None) -> th.Tensor:
+    def _sample_no_grad(
+        self, step_bias: th.Tensor, w_action_t: th.Tensor, x: th.Tensor | None, noise: th.Tensor | None
+    ) -> th.Tensor:
         """The reverse chain of :meth:`sample` without autograd, from :meth:`_inference_plan`'s weights.
 
         Same function (float rounding aside), about half the kernel launches: contiguous ``W^T`` GEMMs,
