@@ -59,7 +59,8 @@ def _actor_grad_from_step(model: POLA, step: int, obs: th.Tensor) -> tuple[float
     model._gamma_powers = weights
     model.actor.zero_grad(set_to_none=True)
     obs = obs.clone().requires_grad_(True)
-    q_loss, _ = model._lookahead_q_loss(obs, model.policy.actor_features(obs))
+    with model._critic_frozen():
+        q_loss, _ = model._lookahead_q_loss(obs, model.policy.actor_features(obs))
     q_loss.backward()
     norm = sum(p.grad.norm() ** 2 for p in model.actor.parameters() if p.grad is not None) ** 0.5
     assert all(p.grad is None for p in model.critic.parameters()), "the actor loss must not train the critic"

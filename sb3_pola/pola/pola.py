@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import Any, ClassVar, TypeVar
 
 import torch as th
@@ -88,6 +90,10 @@ class POLA(OfflineAlgorithm):
     :param ema_start: gradient step from which the EMA averages (before it copies the actor)
     :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`
     :param dynamics_fit_kwargs: arguments of :meth:`~sb3_pola.common.dynamics.EnsembleDynamics.fit`
+    :param compile_update: compile the critic and actor losses (forward and backward) with ``torch.compile``
+        for the static shapes of training, and on CUDA capture them as CUDA graphs (the GPU speed path).
+        The first gradient step compiles (tens of seconds); random draws match eager PyTorch
+        (``fallback_random``), so results are the eager update's up to float rounding. ``False``: eager.
     :param download: let Minari download a dataset id that is not found locally
     :param policy_kwargs: extra arguments of :class:`~sb3_pola.pola.policies.POLAPolicy`
         (``net_arch``, ``activation_fn``, ``n_action_samples``, ``critic_state_products``, ...)
@@ -127,6 +133,7 @@ class POLA(OfflineAlgorithm):
         ema_start: int = 1000,
         dynamics_kwargs: dict[str, Any] | None = None,
         dynamics_fit_kwargs: dict[str, Any] | None = None,
+        compile_update: bool = False,
         download: bool = False,
         policy_kwargs: dict[str, Any] | None = None,
         tensorboard_log: str | None = None,
@@ -169,6 +176,8 @@ class POLA(OfflineAlgorithm):
         self.dynamics_kwargs = dynamics_kwargs or {}
         self.dynamics_fit_kwargs = dynamics_fit_kwargs or {}
         self.dynamics_fit_info: dict[str, float] = {}
+        self.compile_update = compile_update
+        self._compiled_loss_fns: tuple[Any, Any] | None = None
         if _init_setup_model:
             self._setup_model()
 
@@ -198,6 +207,10 @@ class POLA(OfflineAlgorithm):
         self._create_aliases()
         self._gamma_powers = th.tensor([self.gamma**i for i in range(self.rollout_length + 1)], device=self.device)
 
+    @property
+    def _cudagraphs(self) -> bool:
+        return self.compile_update and self.device.type == "cuda"
+
     def _create_aliases(self) -> None:
         self.actor = self.policy.actor
         self.critic = self.policy.critic
@@ -211,6 +224,7 @@ class POLA(OfflineAlgorithm):
             "critic_target",
             "_termination_fn",
             "_gamma_powers",
+            "_compiled_loss_fns",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -247,30 +261,18 @@ class POLA(OfflineAlgorithm):
         """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics."""
         obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
         rewards, dones = batch.rewards.flatten(), batch.dones.flatten()
-        policy = self.policy
+        critic_loss_fn, actor_loss_fn = self._loss_fns()
+        if self._cudagraphs:
+            th.compiler.cudagraph_mark_step_begin()  # a new iteration: earlier graph outputs are consumed
 
-        # critic: pessimistic TD target, min over the target ensemble (section IV)
-        with th.no_grad():
-            next_actions = policy.actor_ema.sample(policy.actor_features(next_obs))
-            next_q = self.critic_target(next_obs, next_actions).min(dim=0).values  # [B]
-            target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
-        current_q = self.critic(obs, actions)  # [N, B]
-        critic_loss = (current_q - target_q).pow(2).mean(dim=1).sum()
+        critic_loss, stats = critic_loss_fn(obs, actions, next_obs, rewards, dones)
         self.critic.optimizer.zero_grad(set_to_none=True)
         critic_loss.backward()
         critic_grad_norm = self._clip(self.critic.parameters())
         self.critic.optimizer.step()
 
-        # actor: L_d + eta * L_q (eq. 6 and eq. 3/4)
-        features = policy.actor_features(obs)
-        bc_loss = self.actor.loss(actions, features)
-        stats: dict[str, th.Tensor] = {}
-        if self.eta != 0:
-            q_loss, stats = self._lookahead_q_loss(obs, features)
-            actor_loss = bc_loss + self.eta * q_loss
-        else:
-            q_loss = th.zeros((), device=obs.device)
-            actor_loss = bc_loss
+        with self._critic_frozen():
+            actor_loss, actor_stats = actor_loss_fn(obs, actions)
         self.actor.optimizer.zero_grad(set_to_none=True)
         actor_loss.backward()
         actor_grad_norm = self._clip(self.actor.parameters())
@@ -280,21 +282,76 @@ class POLA(OfflineAlgorithm):
         step = self._n_updates + 1
         if step % self.ema_update_freq == 0:
             decay = self.ema_decay if step >= self.ema_start else 0.0
-            _lerp_params(self.actor.parameters(), policy.actor_ema.parameters(), 1.0 - decay)
+            _lerp_params(self.actor.parameters(), self.policy.actor_ema.parameters(), 1.0 - decay)
         _lerp_params(self.critic.parameters(), self.critic_target.parameters(), self.tau)
 
+        stats.update(actor_stats)
         stats.update(
             critic_loss=critic_loss.detach(),
             actor_loss=actor_loss.detach(),
-            bc_loss=bc_loss.detach(),
-            q_loss=q_loss.detach(),
-            q_mean=current_q.detach().mean(),
-            q_ensemble_std=current_q.detach().std(dim=0).mean(),
-            target_q=target_q.mean(),
             critic_grad_norm=critic_grad_norm,
             actor_grad_norm=actor_grad_norm,
         )
         return stats
+
+    @contextlib.contextmanager
+    def _critic_frozen(self) -> Iterator[None]:
+        """The actor's Q term must not train the critic: its weights take no gradient while the loss is built."""
+        self.critic.requires_grad_(False)
+        try:
+            yield
+        finally:
+            self.critic.requires_grad_(True)
+
+    def _critic_loss(
+        self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor, dones: th.Tensor
+    ) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """TD loss of every ensemble member on the pessimistic target, min over the target ensemble (section IV)."""
+        policy = self.policy
+        with th.no_grad():
+            next_actions = policy.actor_ema.sample(policy.actor_features(next_obs))
+            next_q = self.critic_target(next_obs, next_actions).min(dim=0).values  # [B]
+            target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
+        current_q = self.critic(obs, actions)  # [N, B]
+        critic_loss = (current_q - target_q).pow(2).mean(dim=1).sum()
+        q = current_q.detach()
+        return critic_loss, {"q_mean": q.mean(), "q_ensemble_std": q.std(dim=0).mean(), "target_q": target_q.mean()}
+
+    def _actor_loss(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """``L_d + eta * L_q`` (eq. 6 and eq. 3/4)."""
+        features = self.policy.actor_features(obs)
+        bc_loss = self.actor.loss(actions, features)
+        stats: dict[str, th.Tensor] = {}
+        if self.eta != 0:
+            q_loss, stats = self._lookahead_q_loss(obs, features)
+            actor_loss = bc_loss + self.eta * q_loss
+        else:
+            q_loss = th.zeros((), device=obs.device)
+            actor_loss = bc_loss
+        stats.update(bc_loss=bc_loss.detach(), q_loss=q_loss.detach())
+        return actor_loss, stats
+
+    def _loss_fns(self) -> tuple[Any, Any]:
+        """The critic and actor loss functions: the methods themselves, or their ``torch.compile``'d graphs.
+
+        With ``compile_update`` both losses (forward and backward) are compiled for the static shapes of
+        training; on CUDA they are also captured as CUDA graphs (inductor's ``triton.cudagraphs``).
+        ``fallback_random`` keeps the random draws those of eager PyTorch, so on CPU the compiled update gives
+        the eager update's numbers up to float rounding. The optimizer steps, clipping, EMA and Polyak
+        updates stay eager (a few fused ``_foreach`` kernels).
+        """
+        if self._compiled_loss_fns is not None:
+            return self._compiled_loss_fns
+        if not self.compile_update:
+            return self._critic_loss, self._actor_loss
+        options: dict[str, Any] = {"fallback_random": True}
+        if self._cudagraphs:
+            options["triton.cudagraphs"] = True
+        self._compiled_loss_fns = (
+            th.compile(self._critic_loss, dynamic=False, options=options),
+            th.compile(self._actor_loss, dynamic=False, options=options),
+        )
+        return self._compiled_loss_fns
 
     def _lookahead_q_loss(self, obs: th.Tensor, features: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """``L_q`` of eq. 4: top-K pessimistic Q at ``s_t`` and at ``T`` model-predicted states, weighted by ``gamma^i``."""
@@ -316,10 +373,8 @@ class POLA(OfflineAlgorithm):
             states.append(state)
             actions_.append(action)
 
-        # all T + 1 critic evaluations in one ensemble call; critic weights get no gradient here
-        self.critic.requires_grad_(False)
+        # all T + 1 critic evaluations in one ensemble call (the caller has switched off the critic's gradients)
         q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
-        self.critic.requires_grad_(True)
         alive_mask = th.stack(alive)  # [T+1, B]
         q_loss, per_step = lookahead_q_objective(
             q.view(-1, horizon + 1, batch_size), alive_mask, self._gamma_powers, self.top_k

@@ -101,7 +101,7 @@ class DiffusionActor(nn.Module):
     def _time_projection(self) -> th.Tensor:
         """``[n, H]`` projection of every step's time embedding by the first layer (cached without autograd)."""
         t_dim, a_dim = self.time_embedding_dim, self.action_dim
-        if th.is_grad_enabled() and self.input_layer.weight.requires_grad:
+        if (th.is_grad_enabled() and self.input_layer.weight.requires_grad) or th.compiler.is_compiling():
             return F.linear(self.time_mlp(self.step_indices), self.input_layer.weight[:, a_dim : a_dim + t_dim])
         return self._inference_plan().time_proj
 
@@ -162,7 +162,8 @@ class DiffusionActor(nn.Module):
         step_bias = state_proj.unsqueeze(0) + self._time_projection().unsqueeze(1)  # [n, B, H]
         w_action_t = weight[:, :a_dim].t()  # [A, H]
         shape = (self.n_diffusion_steps + 1, batch_size, a_dim)
-        if not th.is_grad_enabled():
+        # eager inference takes the cached plan; a compiled graph traces the plain chain (the cache is Python state)
+        if not th.is_grad_enabled() and not th.compiler.is_compiling():
             if deterministic:
                 return self._sample_no_grad(step_bias, w_action_t, None, None)
             noise = th.randn(shape, device=features.device, dtype=features.dtype, generator=generator)
