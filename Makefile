@@ -14,6 +14,8 @@ STEPS ?= 6000
 SEED ?= 0
 OUT ?= outputs/main
 PYTEST_ARGS ?=
+# e.g. BENCH_ARGS="--threads 1" (the README's figures) or "--device cuda"
+BENCH_ARGS ?=
 
 .PHONY: install train test test-all lint format type bench bench-quick score clean
 
@@ -50,10 +52,10 @@ type: $(STAMP)
 	$(PY) -m mypy sb3_pola
 
 bench: $(STAMP)
-	$(PY) -m sb3_pola.cli bench --out benchmarks/results
+	$(PY) -m sb3_pola.cli bench --out benchmarks/results $(BENCH_ARGS)
 
 bench-quick: $(STAMP)
-	$(PY) -m sb3_pola.cli bench --quick --out benchmarks/results
+	$(PY) -m sb3_pola.cli bench --quick --out benchmarks/results $(BENCH_ARGS)
 
 score: $(STAMP)
 	$(PY) -m sb3_pola.cli score $(SCORE_ARGS)

@@ -74,6 +74,87 @@ def _flatten(value: Any, prefix: str = "") -> list[tuple[str, str]]:
     return [(prefix, str(value))]
 
 
+def _seconds(value: Any) -> str:
+    return f"{value:.3g} s" if isinstance(value, (int, float)) else ""
+
+
+def _other_section(name: str, section: Any) -> list[str]:
+    """A section the tables do not know (an error, an older layout) as a dotted key list."""
+    lines = ["", f"{name} (from `sb3_pola.benchmarks.{name}_bench`):", ""]
+    return lines + [f"- {key}: {value}" for key, value in _flatten(section)]
+
+
+def _data_table(data: Any) -> list[str]:
+    """Dataset load times and memory, one row per dataset (``data_bench.run``'s ``{dataset id: figures}``)."""
+    if data is None:
+        return []
+    rows = {k: v for k, v in data.items() if isinstance(v, dict) and "steps" in v} if isinstance(data, dict) else {}
+    if not rows:
+        return _other_section("data", data)
+    lines = [
+        "",
+        "| dataset | steps | first load | cached load | float32 size | peak memory / float32 (first, cached load) "
+        "| buffer shares memory |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, r in rows.items():
+        first_peak, cached_peak = r.get("tracemalloc_peak_build_over_float32"), r.get("tracemalloc_peak_cached_over_float32")
+        peak = f"{first_peak:.3f}x, {cached_peak:.3f}x" if first_peak is not None and cached_peak is not None else ""
+        shares = r.get("buffer_shares_memory")
+        lines.append(
+            f"| {name} | {r['steps']:,} | {_seconds(r.get('first_load_s'))} | {_seconds(r.get('cached_load_s'))} | "
+            f"{r.get('float32_mb', '')} MB | {peak} | {'' if shares is None else ('yes' if shares else 'NO')} |"
+        )
+    extra = [
+        f"peak RSS of the benchmark process so far {v:.0f} MB" if k == "process_maxrss_mb" else f"{k}: {v}"
+        for k, v in data.items()
+        if k not in rows
+    ]
+    lines += [
+        "",
+        "Load times are wall clock (first: Minari episode by episode into a fresh cache; cached: from that cache); "
+        "peak memory is the Python-level (tracemalloc) peak while loading." + (f" {'; '.join(extra)}." if extra else ""),
+    ]
+    return lines
+
+
+def _dynamics_table(dyn: Any) -> list[str]:
+    """The dynamics model's fit, one row per data size (``dynamics_bench.run``'s ``fit`` list)."""
+    if dyn is None:
+        return []
+    fits = dyn.get("fit") if isinstance(dyn, dict) else None
+    if not isinstance(fits, list) or not all(isinstance(m, dict) and "fit_time" in m for m in fits):
+        return _other_section("dynamics", dyn)
+    lines = [
+        "",
+        "| dynamics fit, transitions | fit time | epochs | gradient steps | ms/step | holdout next-state MSE "
+        "(no-change MSE) | holdout reward MSE |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for m in fits:
+        mse, no_change = m.get("holdout_mse"), m.get("no_change_mse")
+        ratio = f", ratio {mse / no_change:.3f}" if mse is not None and no_change else ""
+        mse_text = f"{mse:.4g} ({no_change:.4g}{ratio})" if mse is not None and no_change is not None else ""
+        reward = m.get("holdout_reward_mse")
+        lines.append(
+            f"| {int(m['n']):,} | {_seconds(m['fit_time'])} | {int(m.get('epochs', 0))} | {int(m.get('steps', 0))} | "
+            f"{m.get('ms_per_step', float('nan')):.3g} | {mse_text} | {'' if reward is None else f'{reward:.3g}'} |"
+        )
+    notes = ["7 members, 5 elites, 4 x 200, batch 256, epochs capped (an epoch is at most 1000 gradient steps)"]
+    step = dyn.get("step")
+    if isinstance(step, dict) and "step_deterministic_ms" in step:
+        notes.append(
+            f"one differentiable step() at batch 256 (forward + backward to the inputs): deterministic "
+            f"{step['step_deterministic_ms']:.3g} ms, stochastic {step.get('step_stochastic_ms', float('nan')):.3g} ms"
+        )
+    if "threads" in dyn:
+        load = ""
+        if isinstance(dyn.get("load_before"), (int, float)) and isinstance(dyn.get("load_after"), (int, float)):
+            load = f", 1-minute load {dyn['load_before']:.2f} -> {dyn['load_after']:.2f}"
+        notes.append(f"torch threads {dyn['threads']}{load}")
+    return [*lines, "", "; ".join(notes) + "."]
+
+
 def format_tables(results: dict[str, Any]) -> str:
     """Markdown tables of the results, each figure next to its target where the issue sets one."""
     info = results["machine"]
@@ -140,11 +221,8 @@ def format_tables(results: dict[str, Any]) -> str:
             )
     elif pred is not None:
         lines += ["", f"predict: {pred}"]
-    for name in ("data", "dynamics"):
-        section = results.get(name)
-        if section is not None:
-            lines += ["", f"{name} (from `sb3_pola.benchmarks.{name}_bench`):", ""]
-            lines += [f"- {key}: {value}" for key, value in _flatten(section)]
+    lines += _data_table(results.get("data"))
+    lines += _dynamics_table(results.get("dynamics"))
     lines += ["", f"Total benchmark time: {results['total_s']:.0f} s"]
     return "\n".join(lines)
 

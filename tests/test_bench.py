@@ -1,0 +1,47 @@
+"""``sb3-pola bench``'s data and dynamics sections and its tables, on tiny sizes (no timings checked)."""
+
+from __future__ import annotations
+
+import os
+
+from sb3_pola.benchmarks import data_bench, dynamics_bench
+from sb3_pola.benchmarks.bench import format_tables
+
+MACHINE = {"cpu": "test", "cpu_count": 2, "torch_threads": 1, "torch": "x", "device": "cpu", "date": "d", "command": "c"}
+
+
+def test_data_sizes_cover_the_issue():
+    """Full mode always has the 100k and 1M figures (no local datasets needed); quick mode 100k."""
+    assert data_bench.synthetic_sizes(quick=False) == (100_000, 1_000_000)
+    assert data_bench.synthetic_sizes(quick=True) == (100_000,)
+
+
+def test_data_bench_rows_and_table(tmp_path, monkeypatch):
+    monkeypatch.setattr(data_bench, "synthetic_sizes", lambda quick: (2_000, 3_000))
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "none"))  # no local datasets there
+    result = data_bench.run(quick=False)
+    assert os.environ["MINARI_DATASETS_PATH"] == str(tmp_path / "none")  # restored
+    rows = {k: v for k, v in result.items() if k != "process_maxrss_mb"}
+    assert list(rows) == ["synthetic/steps2000-v0", "synthetic/steps3000-v0"]
+    for steps, row in zip((2_000, 3_000), rows.values(), strict=True):
+        assert row["steps"] == steps and row["buffer_shares_memory"]
+        assert row["first_load_s"] >= 0 and row["cached_load_s"] >= 0
+    table = format_tables({"machine": MACHINE, "data": result, "total_s": 1.0})
+    assert "| dataset | steps | first load | cached load |" in table
+    assert "| synthetic/steps2000-v0 | 2,000 |" in table and "| synthetic/steps3000-v0 | 3,000 |" in table
+    assert "peak RSS of the benchmark process" in table
+    assert "- synthetic" not in table  # no dotted key list
+
+
+def test_dynamics_table():
+    fit = dynamics_bench.bench_fit(600, max_epochs=1)
+    result = {"threads": 1, "load_before": 0.5, "fit": [fit], "step": {"step_deterministic_ms": 1.0}, "load_after": 0.6}
+    table = format_tables({"machine": MACHINE, "dynamics": result, "total_s": 1.0})
+    assert "| dynamics fit, transitions | fit time | epochs | gradient steps | ms/step |" in table
+    assert f"| 600 | {fit['fit_time']:.3g} s | 1 | {int(fit['steps'])} |" in table
+    assert "deterministic 1 ms" in table and "torch threads 1" in table
+
+
+def test_sections_in_an_unknown_shape_stay_readable():
+    table = format_tables({"machine": MACHINE, "data": {"error": "OSError: x"}, "dynamics": {"error": "boom"}, "total_s": 1.0})
+    assert "- error: OSError: x" in table and "- error: boom" in table
