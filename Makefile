@@ -14,8 +14,8 @@ STEPS ?= 6000
 SEED ?= 0
 OUT ?= outputs/main
 PYTEST_ARGS ?=
-# e.g. BENCH_ARGS="--threads 1" (the README's figures) or "--device cuda"
-BENCH_ARGS ?=
+# one torch thread by default (the README's figures); e.g. BENCH_ARGS="--device cuda" on a GPU
+BENCH_ARGS ?= --threads 1
 
 .PHONY: install train test test-all lint format type bench bench-quick score clean
 

@@ -40,6 +40,8 @@ _failed = False
 def compiled_mish(x: th.Tensor) -> th.Tensor:
     """Mish through a fused kernel compiled once (dynamic shapes); ``F.mish`` if compilation fails."""
     global _compiled, _failed
+    if th.compiler.is_compiling():  # inside a graph being compiled (compile_update): inline the one-exp form
+        return mish_exp(x)
     # eager for small tensors, and under a dispatch mode (FLOP counters, profilers' modes), which would make
     # dynamo recompile for every mode until its cache limit, after which it runs mish_exp unfused
     if _failed or x.numel() < MIN_COMPILED_NUMEL or _get_current_dispatch_mode() is not None:

@@ -412,7 +412,8 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
     def _accumulate_train_stats(self, stats: dict[str, th.Tensor]) -> None:
         """Add one gradient step's detached statistics; they stay on the device until the next dump."""
         for key, value in stats.items():
-            self._stat_sums[key] = self._stat_sums[key] + value if key in self._stat_sums else value
+            # a copy, never the value itself: a CUDA-graph replay overwrites its outputs in place
+            self._stat_sums[key] = self._stat_sums[key] + value if key in self._stat_sums else value.clone()
         self._stat_count += 1
 
     def _record_train_stats(self) -> None:
