@@ -81,6 +81,7 @@ class DiffusionActor(nn.Module):
         # coef1 >= 0 lets the no-grad chain fold it into the clip: c1 clip(z, -1, 1) = clip(c1 z, -c1, c1)
         assert all(c[2] >= 0.0 for c in self._step_coefs)
         self._inference_cache: tuple[tuple[int, ...], _InferencePlan] | None = None
+        self._plan_params: list[nn.Parameter] | None = None
 
     @property
     def n_diffusion_steps(self) -> int:
@@ -112,8 +113,9 @@ class DiffusionActor(nn.Module):
         EMA updates and ``load_state_dict`` are in place and bump the counters, ``.to()`` moves the storage.
         Writing through ``.data`` bumps nothing, so code that does must call :meth:`clear_inference_cache`.
         """
-        params = list(self.parameters())
-        key = tuple(v for p in params for v in (id(p), p._version, p.data_ptr()))
+        if self._plan_params is None:  # the parameter objects never change; their values and storage do
+            self._plan_params = list(self.parameters())
+        key = tuple(v for p in self._plan_params for v in (p._version, p.data_ptr()))
         if self._inference_cache is None or self._inference_cache[0] != key:
             with th.no_grad():
                 plan = self._build_inference_plan()
@@ -123,6 +125,7 @@ class DiffusionActor(nn.Module):
     def clear_inference_cache(self) -> None:
         """Forget the cached inference weights (needed only after writing parameters through ``.data``)."""
         self._inference_cache = None
+        self._plan_params = None
 
     def _build_inference_plan(self) -> _InferencePlan:
         t_dim, a_dim = self.time_embedding_dim, self.action_dim
@@ -142,7 +145,16 @@ class DiffusionActor(nn.Module):
         for recip, recipm1, coef1, coef2, sigma in self._step_coefs:
             alpha = -recipm1 * coef1
             steps.append((alpha, last.bias.detach() * alpha, recip * coef1, coef1, coef2, sigma))
-        return _InferencePlan(time_proj, hidden, last.weight.detach().t().contiguous(), steps)
+        weight = self.input_layer.weight.detach()
+        return _InferencePlan(
+            w_state_t=weight[:, a_dim + t_dim :].t().contiguous(),
+            b_in=self.input_layer.bias.detach(),
+            w_action_t=weight[:, :a_dim].t().contiguous(),
+            time_proj=time_proj,
+            hidden=hidden,
+            w_last_t=last.weight.detach().t().contiguous(),
+            steps=steps,
+        )
 
     def sample(self, features: th.Tensor, generator: th.Generator | None = None, deterministic: bool = False) -> th.Tensor:
         """Draw actions with the reverse chain (eq. 5), differentiable w.r.t. the parameters and ``features``.
@@ -154,20 +166,19 @@ class DiffusionActor(nn.Module):
             (on InvertedPendulum it dropped a policy's return from 1000 to 58); the mean path does not.
         :return: ``[B, A]`` actions in ``[-1, 1]``
         """
-        batch_size = features.shape[0]
         a_dim, t_dim = self.action_dim, self.time_embedding_dim
+        shape = (self.n_diffusion_steps + 1, features.shape[0], a_dim)
+        # eager inference takes the cached plan; a compiled graph traces the plain chain (the cache is Python state)
+        if not th.is_grad_enabled() and not th.compiler.is_compiling():
+            if deterministic:
+                return self._sample_no_grad(features, None)
+            noise = th.randn(shape, device=features.device, dtype=features.dtype, generator=generator)
+            return self._sample_no_grad(features, noise)
         weight = self.input_layer.weight  # [H, A + time + F]
         # constant over the chain: state and time projections, computed once, summed per step up front
         state_proj = F.linear(features, weight[:, a_dim + t_dim :], self.input_layer.bias)  # [B, H]
         step_bias = state_proj.unsqueeze(0) + self._time_projection().unsqueeze(1)  # [n, B, H]
         w_action_t = weight[:, :a_dim].t()  # [A, H]
-        shape = (self.n_diffusion_steps + 1, batch_size, a_dim)
-        # eager inference takes the cached plan; a compiled graph traces the plain chain (the cache is Python state)
-        if not th.is_grad_enabled() and not th.compiler.is_compiling():
-            if deterministic:
-                return self._sample_no_grad(step_bias, w_action_t, None, None)
-            noise = th.randn(shape, device=features.device, dtype=features.dtype, generator=generator)
-            return self._sample_no_grad(step_bias, w_action_t, noise[-1], noise)
         if deterministic:
             noise = th.zeros(shape, device=features.device, dtype=features.dtype)
         else:
@@ -183,20 +194,21 @@ class DiffusionActor(nn.Module):
             x = x_new.add_(noise[t], alpha=sigma) if t > 0 else x_new
         return x.clamp(-1.0, 1.0)
 
-    def _sample_no_grad(
-        self, step_bias: th.Tensor, w_action_t: th.Tensor, x: th.Tensor | None, noise: th.Tensor | None
-    ) -> th.Tensor:
+    def _sample_no_grad(self, features: th.Tensor, noise: th.Tensor | None) -> th.Tensor:
         """The reverse chain of :meth:`sample` without autograd, from :meth:`_inference_plan`'s weights.
 
         Same function (float rounding aside), about half the kernel launches: contiguous ``W^T`` GEMMs,
         the step's coefficients folded into the last layer's ``addmm`` and the clip, in-place updates.
 
-        :param x: ``a_T`` (``None``: zeros, the deterministic chain)
-        :param noise: ``[n, B, A]`` noise of the steps (``None``: the deterministic chain)
+        :param features: ``[B, F]`` state features
+        :param noise: ``[n + 1, B, A]`` noise (``a_T`` last); ``None``: the deterministic chain from ``a_T = 0``
         """
         plan = self._inference_plan()
+        state_proj = th.addmm(plan.b_in, features, plan.w_state_t)  # [B, H]
+        step_bias = state_proj.unsqueeze(0) + plan.time_proj.unsqueeze(1)  # [n, B, H]
+        x = None if noise is None else noise[-1]
         for t in reversed(range(self.n_diffusion_steps)):
-            h = step_bias[t] if x is None else th.addmm(step_bias[t], x, w_action_t)
+            h = step_bias[t] if x is None else th.addmm(step_bias[t], x, plan.w_action_t)
             for layer in plan.hidden:
                 h = th.addmm(layer[0], h, layer[1]) if isinstance(layer, tuple) else layer(h)
             alpha, bias_t, x_coef, coef1, coef2, sigma = plan.steps[t]
@@ -215,6 +227,9 @@ class DiffusionActor(nn.Module):
 class _InferencePlan(NamedTuple):
     """Weights of :meth:`DiffusionActor._sample_no_grad`, derived from the parameters (never saved)."""
 
+    w_state_t: th.Tensor  # [F, H]: the first layer's state block, transposed
+    b_in: th.Tensor  # [H]: the first layer's bias
+    w_action_t: th.Tensor  # [A, H]: the first layer's action block, transposed
     time_proj: th.Tensor  # [n, H]: each step's time embedding through the first layer
     hidden: list[Any]  # the trunk but its last layer: (bias, W^T) pairs and activation functions
     w_last_t: th.Tensor  # [H, A]: W^T of the last layer
