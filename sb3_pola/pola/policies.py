@@ -444,9 +444,11 @@ class POLAPolicy(BasePolicy):
         return actions.view(batch_size, n, -1)[th.arange(batch_size, device=obs.device), idx]
 
     def set_training_mode(self, mode: bool) -> None:
-        # targets and the EMA copy stay in eval mode; they have no dropout/batch-norm, so this is for clarity only
-        self.actor.train(mode)
-        self.critic.train(mode)
+        # targets and the EMA copy stay in eval mode; they have no dropout/batch-norm, so this is for clarity only.
+        # predict() calls this every time: walking the ~30 submodules cost ~40% of a single-observation predict
+        for module in (self.actor, self.critic):
+            if module.training != mode:
+                module.train(mode)
         self.training = mode
 
 
