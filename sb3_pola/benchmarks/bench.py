@@ -202,6 +202,13 @@ def format_tables(results: dict[str, Any]) -> str:
         if "dataset_1m_over_100k" in scaling:
             s = scaling["dataset_1m_over_100k"]
             lines.append(f"| 1M / 100k transitions step time | {s['ratio']:.2f}x | {s['target']} | {_status(s['met'])} |")
+        if "gpu_paper_steps_per_s" in scaling:
+            s = scaling["gpu_paper_steps_per_s"]
+            lines.append(
+                f"| GPU: paper configuration | {s['steps_per_s']:.0f} steps/s ({s['best']}) | {s['target']} | {_status(s['met'])} |"
+            )
+        elif info["device"] == "cpu":
+            lines.append("| GPU: paper configuration | not measured (CPU run; `--device cuda` on a GPU) | >= 500 steps/s | |")
     pred = results.get("predict")
     if isinstance(pred, dict) and "single" in pred:
         s = pred["single"]
