@@ -205,7 +205,8 @@ def format_tables(results: dict[str, Any]) -> str:
         if "gpu_paper_steps_per_s" in scaling:
             s = scaling["gpu_paper_steps_per_s"]
             lines.append(
-                f"| GPU: paper configuration | {s['steps_per_s']:.0f} steps/s ({s['best']}) | {s['target']} | {_status(s['met'])} |"
+                f"| GPU: paper configuration | {s['steps_per_s']:.0f} steps/s ({s['best']}) | {s['target']} "
+                f"| {_status(s['met'])} |"
             )
         elif info["device"] == "cpu":
             lines.append("| GPU: paper configuration | not measured (CPU run; `--device cuda` on a GPU) | >= 500 steps/s | |")
