@@ -12,6 +12,7 @@ import torch as th
 from torch.nn import functional as F
 
 from sb3_pola.benchmarks.common import make_pola, synthetic_dataset
+from sb3_pola.common import activations
 from sb3_pola.common.activations import FusedMish, compiled_mish, mish_exp
 
 RTOL, ATOL = 1e-4, 1e-5
@@ -237,3 +238,27 @@ def test_compiled_update_matches_eager():
     for got, want in zip(compiled.policy.parameters(), eager.policy.parameters(), strict=True):
         _close(got, want)
     assert compiled._compiled_loss_fns is not None and eager._compiled_loss_fns is None
+
+
+def test_compile_update_falls_back_to_eager(monkeypatch):
+    """A compiler that fails (no C++ compiler, unsupported platform) leaves an eager update and a warning."""
+
+    def broken_compile(fn, **kwargs):
+        def compiled(*args):
+            raise RuntimeError("no compiler here")
+
+        return compiled
+
+    monkeypatch.setattr(th, "compile", broken_compile)
+    for name in ("_compiled", "_failed"):  # compiled Mish's module state is restored after the test
+        monkeypatch.setattr(activations, name, getattr(activations, name))
+    eager, compiled = _model(), _model(compile_update=True)
+    compiled.policy.load_state_dict(eager.policy.state_dict())
+    batch = eager._setup_offline_data().sample(32)
+    th.manual_seed(5)
+    want = eager._update(batch)
+    th.manual_seed(5)
+    with pytest.warns(UserWarning, match="compilation failed"):
+        got = compiled._update(batch)
+    for key in want:
+        _close(got[key], want[key])

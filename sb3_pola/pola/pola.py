@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+import warnings
+from collections.abc import Callable, Iterator
 from typing import Any, ClassVar, TypeVar
 
 import torch as th
@@ -23,6 +24,33 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
     """Polyak update ``target <- (1 - tau) target + tau param`` of all tensors in one ``_foreach_lerp_`` call."""
     with th.no_grad():
         th._foreach_lerp_(list(target_params), list(params), tau)
+
+
+def _eager_fallback(compiled: Callable[..., Any], eager: Callable[..., Any]) -> Callable[..., Any]:
+    """``compiled``, or ``eager`` (with a warning) for good if its first call, the compilation, fails.
+
+    Tracing runs on fake tensors, so a failed compilation has drawn no random numbers and changed nothing.
+    """
+    state: dict[str, bool | None] = {"compiled": None}
+
+    def call(*args: Any) -> Any:
+        if state["compiled"] is False:
+            return eager(*args)
+        try:
+            out = compiled(*args)
+        except Exception as error:
+            if state["compiled"]:
+                raise  # it ran compiled before: a real error, not a compiler one
+            state["compiled"] = False
+            warnings.warn(
+                f"compile_update: compilation failed ({type(error).__name__}: {str(error)[:300]}); training eagerly",
+                stacklevel=3,
+            )
+            return eager(*args)
+        state["compiled"] = True
+        return out
+
+    return call
 
 
 def lookahead_q_objective(q: th.Tensor, alive: th.Tensor, gamma_powers: th.Tensor, top_k: int) -> tuple[th.Tensor, th.Tensor]:
@@ -351,8 +379,8 @@ class POLA(OfflineAlgorithm):
         if self._cudagraphs:
             options["triton.cudagraphs"] = True
         self._compiled_loss_fns = (
-            th.compile(self._critic_loss, dynamic=False, options=options),
-            th.compile(self._actor_loss, dynamic=False, options=options),
+            _eager_fallback(th.compile(self._critic_loss, dynamic=False, options=options), self._critic_loss),
+            _eager_fallback(th.compile(self._actor_loss, dynamic=False, options=options), self._actor_loss),
         )
         return self._compiled_loss_fns
 
