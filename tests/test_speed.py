@@ -6,6 +6,7 @@ No timings here (speed is measured by ``sb3-pola bench``); these tests pin the m
 from __future__ import annotations
 
 import copy
+import math
 
 import pytest
 import torch as th
@@ -262,3 +263,20 @@ def test_compile_update_falls_back_to_eager(monkeypatch):
         got = compiled._update(batch)
     for key in want:
         _close(got[key], want[key])
+
+
+@pytest.mark.parametrize("shape", [(3, 5), (64, 256), (2, 64, 128)])
+def test_inference_mish_equals_mish(shape):
+    x = th.cat((th.linspace(-30, 30, math.prod(shape) - 3), th.tensor([-100.0, 100.0, 0.0]))).reshape(shape)
+    _close(activations.inference_mish(x), F.mish(x))
+
+
+def test_chunked_sampling_equals_one_pass():
+    """The no-grad chain splits large batches into row chunks: same actions as the unchunked autograd chain."""
+    actor = _model().policy.actor_ema
+    feats = th.randn(700, actor.features_dim)  # 256 + 256 + 188 rows
+    with th.no_grad():
+        fast = actor.sample(feats, deterministic=True)
+        noisy = actor.sample(feats, generator=th.Generator().manual_seed(0))
+    _close(fast, actor.sample(feats, deterministic=True))
+    _close(noisy, actor.sample(feats, generator=th.Generator().manual_seed(0)))

@@ -30,6 +30,17 @@ def mish_exp(x: th.Tensor) -> th.Tensor:
     return x * n / (n + 2.0)
 
 
+def inference_mish(x: th.Tensor) -> th.Tensor:
+    """Mish for the no-grad sampling chain, eager: :func:`mish_exp` on tensors of a few thousand elements or
+    more, where its cheap ``exp`` beats ``F.mish``'s three transcendentals (2x at 64k elements on one CPU
+    core), ``F.mish`` below, where each extra kernel launch costs more than it saves. No autograd."""
+    if x.numel() < 4096 or x.device.type != "cpu":  # on GPUs F.mish is one fused kernel already
+        return F.mish(x)
+    e = x.clamp(max=_EXP_CLAMP).exp_()
+    n = e.add(2.0).mul_(e)  # e^x (e^x + 2)
+    return n.div_(n + 2.0).mul_(x)
+
+
 # below this many elements the eager kernel wins: a compiled call's fixed overhead (guards) exceeds the saving
 MIN_COMPILED_NUMEL = 16_384
 
@@ -68,4 +79,4 @@ def fused_activation(activation_fn: type[nn.Module]) -> type[nn.Module]:
     return FusedMish if activation_fn is nn.Mish else activation_fn
 
 
-__all__: list[Any] = ["FusedMish", "compiled_mish", "fused_activation", "mish_exp"]
+__all__: list[Any] = ["FusedMish", "compiled_mish", "fused_activation", "inference_mish", "mish_exp"]
