@@ -299,6 +299,9 @@ class POLA(OfflineAlgorithm):
         critic_loss, critic_stats = critic_loss_fn(obs, actions, next_obs, rewards, dones)
         self.critic.optimizer.zero_grad(set_to_none=True)
         critic_loss.backward()
+        critic_loss = critic_loss.detach()
+        if self._cudagraphs:  # the actor graph's run may start a new CUDA-graph iteration and reuse these outputs
+            critic_loss, critic_stats = critic_loss.clone(), {k: v.clone() for k, v in critic_stats.items()}
         critic_grad_norm = self._clip(self.critic.parameters())
         self.critic.optimizer.step()
 
@@ -318,7 +321,7 @@ class POLA(OfflineAlgorithm):
 
         # losses first: a divergence message names the first few non-finite statistics
         return {
-            "critic_loss": critic_loss.detach(),
+            "critic_loss": critic_loss,
             "actor_loss": actor_loss.detach(),
             **actor_stats,
             **critic_stats,
