@@ -109,9 +109,9 @@ class DiffusionActor(nn.Module):
     def _inference_plan(self) -> _InferencePlan:
         """Weights rearranged for the no-grad chain, cached.
 
-        The cache is keyed on every parameter's identity, version counter and storage: optimizer steps,
-        EMA updates and ``load_state_dict`` are in place and bump the counters, ``.to()`` moves the storage.
-        Writing through ``.data`` bumps nothing, so code that does must call :meth:`clear_inference_cache`.
+        The cache is keyed on every parameter's version counter and storage: optimizer steps, EMA updates
+        and ``load_state_dict`` are in place and bump the counters, ``.to()`` moves the storage. Writing
+        through ``.data`` bumps nothing, so code that does must call :meth:`clear_inference_cache`.
         """
         if self._plan_params is None:  # the parameter objects never change; their values and storage do
             self._plan_params = list(self.parameters())
