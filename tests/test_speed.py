@@ -206,9 +206,19 @@ def test_compiled_mish_equals_mish():
     _close(FusedMish()(x), F.mish(x))
 
 
-def test_compiled_update_matches_eager():
-    """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step."""
+@pytest.mark.parametrize("cudagraph_path", [False, True])
+def test_compiled_update_matches_eager(monkeypatch, cudagraph_path):
+    """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
+
+    ``cudagraph_path`` runs the CUDA code path on CPU (inductor's ``triton.cudagraphs`` option, step marks, output
+    copies); inductor captures graphs only on CUDA, so this checks the plumbing, not the capture.
+    """
     from torch._dynamo.utils import counters
+
+    from sb3_pola.pola import POLA
+
+    if cudagraph_path:
+        monkeypatch.setattr(POLA, "_cudagraphs", property(lambda self: self.compile_update))
 
     kwargs = dict(
         rollout_length=1,
