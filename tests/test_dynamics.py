@@ -202,7 +202,7 @@ def test_step_differentiable_after_freeze() -> None:
     act = th.randn(16, ACT_DIM, requires_grad=True)
     for deterministic in (True, False):
         obs.grad, act.grad = None, None
-        next_obs, reward, term = model.step(obs, act, deterministic=deterministic)
+        next_obs, reward, term, _ = model.step(obs, act, deterministic=deterministic)
         assert next_obs.shape == (16, OBS_DIM) and reward.shape == (16,) and term.shape == (16,)
         (next_obs.sum() + reward.sum() + term.sum()).backward()
         assert obs.grad is not None and act.grad is not None
@@ -239,7 +239,7 @@ def test_stochastic_step_uses_elite_members_only() -> None:
         model.max_logvar.fill_(-29.0)  # ~zero noise: samples equal one member's mean
         model.elites.copy_(th.tensor([0, 2, 3]))
         obs, act = th.randn(1, OBS_DIM).expand(200, -1), th.randn(1, ACT_DIM).expand(200, -1)
-        next_obs, _, _ = model.step(obs, act, deterministic=False)
+        next_obs, _, _, _ = model.step(obs, act, deterministic=False)
         mean, _, _ = model(obs[:1], act[:1])
         member_next = obs[:1] + (mean[:, 0] * model.target_std + model.target_mean)[:, :OBS_DIM]  # [E, obs_dim]
     dist = (next_obs[:, None] - member_next[None]).norm(dim=-1)  # [200, E]
@@ -283,7 +283,7 @@ def test_termination_head_learns_rule() -> None:
     # fresh points: predicted probability agrees with the rule
     test = _synthetic(1000, nonlinear=False, seed=1)
     with th.no_grad():
-        _, _, prob = model.step(test["obs"], test["act"])
+        _, _, prob, _ = model.step(test["obs"], test["act"])
     accuracy = float(((prob > 0.5).float() == test["done"]).float().mean())
     assert accuracy > 0.93, accuracy
 

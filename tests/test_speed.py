@@ -97,7 +97,7 @@ def reference_step(model, policy, batch) -> dict[str, object]:
         terms.append((q_k, alive))
         if i == model.rollout_length:
             break
-        next_state, _, term_prob = policy.dynamics.step(state, action)
+        next_state, _, term_prob, _ = policy.dynamics.step(state, action)
         term = model._termination_fn(state, action, next_state).float() if model._termination_fn else term_prob.detach()
         alive = alive * (1.0 - term)
         state = next_state

@@ -74,7 +74,7 @@ def bench_step(batch_size: int = 256, repeats: int = 50) -> dict[str, float]:
         for i in range(repeats + 5):
             if i == 5:
                 start = time.perf_counter()
-            next_obs, reward, _ = model.step(obs, act, deterministic=deterministic)
+            next_obs, reward, _, _ = model.step(obs, act, deterministic=deterministic)
             (next_obs.sum() + reward.sum()).backward()
         key = "deterministic" if deterministic else "stochastic"
         out[f"step_{key}_ms"] = 1000 * (time.perf_counter() - start) / repeats

@@ -94,6 +94,9 @@ def _split_statistics(
     return mean[:n_in], std[:n_in], mean[n_in:], std[n_in:]
 
 
+MEAN_LOSSES = ("nll", "beta_nll", "mse")
+
+
 class EnsembleDynamics(nn.Module):
     """Ensemble of Gaussian MLPs over ``[delta_state, reward]`` (+ optional termination logit).
 
@@ -111,6 +114,12 @@ class EnsembleDynamics(nn.Module):
     :param learn_termination: add a termination logit head trained on ``dones``
     :param weight_decays: L2 coefficient per linear layer (``n_layers + 1`` values); default
         :func:`default_weight_decays` (2.5e-5, 5e-5, 7.5e-5, 7.5e-5, 1e-4 for 4 hidden layers)
+    :param mean_loss: how the Gaussian mean is fitted. ``"nll"`` (MOPO): the heteroscedastic NLL, which
+        lets a member give up on the mean of hard dimensions by raising their variance; ``"beta_nll"``
+        (Seitzer et al., 2022): the NLL of every element weighted by its detached variance to the power
+        ``beta``, which restores the mean's gradient there; ``"mse"``: the mean by squared error and
+        the variance by the NLL with the mean detached
+    :param beta: the exponent of ``"beta_nll"`` (0 is the NLL, 1 gives the mean an MSE gradient)
     """
 
     elites: th.Tensor
@@ -131,8 +140,14 @@ class EnsembleDynamics(nn.Module):
         n_layers: int = 4,
         learn_termination: bool = False,
         weight_decays: Sequence[float] | None = None,
+        mean_loss: str = "nll",
+        beta: float = 0.5,
     ) -> None:
         super().__init__()
+        if mean_loss not in MEAN_LOSSES:
+            raise ValueError(f"mean_loss must be one of {MEAN_LOSSES}, got {mean_loss!r}")
+        self.mean_loss = mean_loss
+        self.beta = beta
         if not 1 <= n_elites <= n_members:
             raise ValueError(f"need 1 <= n_elites <= n_members, got n_elites={n_elites}, n_members={n_members}")
         self.obs_dim = obs_dim
@@ -205,8 +220,10 @@ class EnsembleDynamics(nn.Module):
         x = self.normalize_inputs(obs, actions)  # [B, in]
         return self._forward(x.unsqueeze(0).expand(self.n_members, -1, -1))  # [E, B, in]
 
-    def step(self, obs: th.Tensor, actions: th.Tensor, deterministic: bool = True) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
-        """One model step ``(s, a) -> (s', r, P(done))`` with the elite members, differentiable w.r.t. the inputs.
+    def step(
+        self, obs: th.Tensor, actions: th.Tensor, deterministic: bool = True
+    ) -> tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]:
+        """One model step ``(s, a) -> (s', r, P(done), u)`` with the elite members, differentiable w.r.t. the inputs.
 
         ``deterministic=True``: the mean over the elites' Gaussian means. ``deterministic=False``: every
         sample uses a uniformly drawn elite and a reparameterised Gaussian sample ``mu + sigma * eps``.
@@ -216,12 +233,18 @@ class EnsembleDynamics(nn.Module):
         :param actions: actions ``[B, action_dim]``
         :param deterministic: mean prediction instead of a sample
         :return: next observations ``[B, obs_dim]``, rewards ``[B]``, termination probabilities ``[B]``
-            (zeros without a termination head)
+            (zeros without a termination head) and the elites' disagreement ``u`` ``[B]``: the RMS over state
+            dimensions of the standard deviation of the elites' mean state changes, in standardised units
+            (the epistemic doubt MOPO-style penalties use; 0 with a single elite)
         """
         x = self.normalize_inputs(obs, actions)  # [B, in]
         batch = x.shape[0]
         x = x.unsqueeze(0).expand(self.n_elites, -1, -1)  # [K, B, in]
         mean, logvar, logit = self._forward(x, self.elites)  # [K, B, D]
+        if self.n_elites > 1:
+            disagreement = mean[..., : self.obs_dim].std(dim=0).pow(2).mean(dim=-1).sqrt()  # [B]
+        else:
+            disagreement = mean.new_zeros(batch)
         if deterministic:
             target = mean.mean(dim=0)  # [B, D]
             term_prob = th.sigmoid(logit).mean(dim=0) if logit is not None else None  # [B]
@@ -237,7 +260,7 @@ class EnsembleDynamics(nn.Module):
         reward = target[:, self.obs_dim]
         if term_prob is None:
             term_prob = th.zeros_like(reward)
-        return next_obs, reward, term_prob
+        return next_obs, reward, term_prob, disagreement
 
     def freeze(self) -> EnsembleDynamics:
         """Stop gradients to the parameters (eval mode); gradients still flow to the inputs of :meth:`step`.
@@ -251,10 +274,16 @@ class EnsembleDynamics(nn.Module):
     def _loss(
         self, mean: th.Tensor, logvar: th.Tensor, logit: th.Tensor | None, y: th.Tensor, done: th.Tensor | None
     ) -> th.Tensor:
-        """Gaussian NLL summed over members + L2 weight decay + log-variance bound penalty (+ BCE)."""
+        """Gaussian NLL (or its ``mean_loss`` form) summed over members + L2 weight decay + log-variance bounds (+ BCE)."""
         inv_var = th.exp(-logvar)
-        nll = (((mean - y) ** 2) * inv_var).mean(dim=(1, 2)) + logvar.mean(dim=(1, 2))  # [E]
-        loss = nll.sum()
+        sq_err = (mean - y) ** 2  # [E, b, D]
+        if self.mean_loss == "nll":
+            elementwise = sq_err * inv_var + logvar
+        elif self.mean_loss == "beta_nll":
+            elementwise = (sq_err * inv_var + logvar) * logvar.detach().mul(self.beta).exp()
+        else:  # "mse": the mean by squared error, the variance by the NLL of the detached mean
+            elementwise = sq_err + (sq_err.detach() * inv_var + logvar)
+        loss = elementwise.mean(dim=(1, 2)).sum()
         for layer, decay in zip(self.linear_layers, self.weight_decays, strict=True):
             loss = loss + decay * 0.5 * layer.weight.pow(2).sum()
         loss = loss + 0.01 * (self.max_logvar.sum() - self.min_logvar.sum())
@@ -503,7 +532,7 @@ class EnsembleDynamics(nn.Module):
         self, obs: th.Tensor, act: th.Tensor, next_obs: th.Tensor, rew: th.Tensor, done: th.Tensor | None
     ) -> dict[str, float]:
         """Raw-space errors of the deterministic :meth:`step` on held-out transitions."""
-        pred_obs, pred_rew, pred_term = self.step(obs, act, deterministic=True)
+        pred_obs, pred_rew, pred_term, _ = self.step(obs, act, deterministic=True)
         metrics = {
             "holdout_mse": float(((pred_obs - next_obs) ** 2).mean()),
             "no_change_mse": float(((obs - next_obs) ** 2).mean()),

@@ -10,7 +10,14 @@ dataset's env (D4RL-normalised score from the dataset's reference scores). Outpu
 - ``fig_rollout_<dataset>.png`` (paper Fig. 3: T in {0, 1, 3, 5}) and
   ``fig_products_<dataset>.png`` (paper Fig. 4: products on/off/in the critic), BC as the floor;
 - ``config.json`` (budget, machine, date), ``cells/`` (finished cells), ``ckpt/`` (a checkpoint
-  per running cell, saved at every evaluation) and ``dynamics/`` (fitted dynamics models).
+  per running cell, saved at every evaluation), ``dynamics/`` (fitted dynamics models),
+  ``models/`` (every finished cell's final model) and ``train/<cell>/`` (the training statistics
+  of the SB3 logger, ``train/*`` every ``--log-interval`` steps, as CSV: one file per segment of a
+  resumed run).
+
+``--reevaluate RULE ...`` evaluates the saved final models again under other evaluation rules
+(``ema``, ``online``, ``candidates<N>``: N noisy candidates ranked by the critic, as Diffusion-QL
+evaluates) and writes ``reeval.csv`` and ``reeval.md``.
 
 An interrupted run is resumed by the same command: finished cells are skipped, a running cell
 continues from its last checkpoint. Presets: ``cpu`` (light networks, a few thousand steps),
@@ -112,6 +119,7 @@ class Config:
     :param dynamics_fit_kwargs: arguments of its fit
     :param share_dynamics: fit the dynamics model once per dataset (first seed) and share it across seeds
     :param extra: further POLA keyword arguments
+    :param log_interval: gradient steps between rows of the training statistics (``train/<cell>/``)
     """
 
     preset: str
@@ -127,10 +135,11 @@ class Config:
     dynamics_fit_kwargs: dict[str, Any] = field(default_factory=dict)
     share_dynamics: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
+    log_interval: int = 500
 
     def signature(self) -> str:
-        """Short hash of the fields (the preset's name excluded)."""
-        data = {k: v for k, v in asdict(self).items() if k != "preset"}
+        """Short hash of the fields that decide results (the preset's name and the logging period excluded)."""
+        data = {k: v for k, v in asdict(self).items() if k not in ("preset", "log_interval")}
         return hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
 
 
@@ -165,6 +174,7 @@ PRESETS: dict[str, Config] = {
 DEFAULT_DATASETS = ["halfcheetah/medium-v0", "halfcheetah/medium-replay-v0"]
 DEFAULT_VARIANTS = ["T0", "T1", "T3", "T5", "T3-noproducts", "T3-criticproducts", "BC"]
 CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s"]
+REEVAL_FIELDS = ["dataset", "variant", "seed", "rule", "step", "score", "score_std", "mean_return", "eval_episodes"]
 
 
 def resolve_device(device: str) -> str:
@@ -189,6 +199,7 @@ def build_config(args: argparse.Namespace, device: str) -> Config:
         "n_critics": args.n_critics,
         "top_k": args.top_k,
         "n_action_samples": args.n_action_samples,
+        "log_interval": args.log_interval,
     }
     config = replace(config, **{k: v for k, v in overrides.items() if v is not None})
     if args.dynamics_steps is not None:
@@ -279,6 +290,24 @@ def append_row(csv_path: pathlib.Path, row: dict[str, Any]) -> None:
             writer.writeheader()
         writer.writerow({k: row[k] for k in CSV_FIELDS})
         f.flush()
+
+
+def _train_logger(folder: pathlib.Path, done_steps: int) -> Any:
+    """An SB3 logger writing ``train/*`` statistics to ``folder/progress_from<step>.csv`` (a file per resumed segment)."""
+    from stable_baselines3.common.logger import CSVOutputFormat, Logger
+
+    folder.mkdir(parents=True, exist_ok=True)
+    return Logger(folder=str(folder), output_formats=[CSVOutputFormat(str(folder / f"progress_from{done_steps}.csv"))])
+
+
+def read_train_stats(folder: pathlib.Path) -> list[dict[str, float]]:
+    """The rows of a cell's training-statistics CSVs (all segments, in step order)."""
+    rows: list[dict[str, float]] = []
+    for path in folder.glob("progress_from*.csv"):
+        with path.open(newline="") as f:
+            for row in csv.DictReader(f):
+                rows.append({k: float(v) for k, v in row.items() if v not in ("", None)})
+    return sorted(rows, key=lambda r: r.get("time/total_timesteps", 0.0))
 
 
 def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib.Path, device: str, verbose: int = 1) -> None:
@@ -381,15 +410,103 @@ def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib
             return True
 
     if remaining > 0:
-        model.learn(remaining, callback=ScoreCallback(), reset_num_timesteps=done_steps == 0, log_interval=0)
+        model.set_logger(_train_logger(out / "train" / name, done_steps))
+        model.learn(remaining, callback=ScoreCallback(), reset_num_timesteps=done_steps == 0, log_interval=config.log_interval)
     env.close()
     marker = out / "cells" / f"{name}.json"
     marker.parent.mkdir(parents=True, exist_ok=True)
     info = {"dataset": dataset, "variant": variant, "seed": seed, "steps": config.steps, "signature": config.signature()}
     info["wall_s"] = round(previous_wall + time.perf_counter() - start, 1)
     info["dynamics_fit"] = {k: float(v) for k, v in getattr(model, "dynamics_fit_info", {}).items()}
+    models = out / "models"
+    models.mkdir(exist_ok=True)
+    if ckpt.exists():  # the last evaluation's checkpoint is the final model; keep it for diagnosis and re-evaluation
+        ckpt.replace(models / f"{name}.zip")
     marker.write_text(json.dumps(info, indent=1))
-    ckpt.unlink(missing_ok=True)  # the cell is finished; its rows are in the CSV
+
+
+# ----------------------------------------------------------------------------------------- re-evaluation
+
+
+def apply_eval_rule(model: Any, rule: str) -> None:
+    """Set how ``model.predict`` picks actions.
+
+    :param model: a POLA model
+    :param rule: ``ema`` (the noise-free chain of the EMA actor, the default), ``online`` (the same chain of
+        the trained actor) or ``candidates<N>`` / ``online-candidates<N>`` (N noisy candidates of the EMA /
+        online actor, the one with the highest pessimistic Q kept, as Diffusion-QL evaluates)
+    """
+    model.policy.predict_actor, model.policy.n_action_samples = parse_eval_rule(rule)
+
+
+def parse_eval_rule(rule: str) -> tuple[str, int]:
+    """``(predict_actor, n_action_samples)`` of an evaluation rule (see :func:`apply_eval_rule`)."""
+    if rule in ("ema", "online"):
+        return rule, 1
+    match = re.fullmatch(r"(online-)?candidates(\d+)", rule)
+    if match is None or int(match.group(2)) < 1:
+        raise ValueError(f"unknown evaluation rule {rule!r}: ema, online, candidates<N> or online-candidates<N>")
+    return ("online" if match.group(1) else "ema"), int(match.group(2))
+
+
+def reevaluate(out: pathlib.Path, rules: list[str], episodes: int, device: str, verbose: int = 1) -> list[dict[str, Any]]:
+    """Evaluate every saved final model of ``out/models`` under each rule; rows go to ``reeval.csv``, a table to ``reeval.md``.
+
+    Episodes use the same reset seeds as the score run, so ``ema`` reproduces the run's final evaluation.
+    Finished (model, rule) pairs in ``reeval.csv`` are skipped.
+    """
+    from sb3_pola.common.datasets import make_env
+    from sb3_pola.pola import POLA
+
+    for rule in rules:  # unknown rules fail before any model is loaded
+        parse_eval_rule(rule)
+    csv_path = out / "reeval.csv"
+    done: set[tuple[str, str]] = set()
+    if csv_path.exists():
+        with csv_path.open(newline="") as f:
+            done = {(r["dataset"] + r["variant"] + r["seed"], r["rule"]) for r in csv.DictReader(f)}
+    for path in sorted((out / "models").glob("*.zip")):
+        marker = json.loads((out / "cells" / f"{path.stem}.json").read_text())
+        dataset, variant, seed = marker["dataset"], marker["variant"], int(marker["seed"])
+        model = POLA.load(path, device=device)
+        env = make_env(dataset)
+        for rule in rules:
+            if (dataset + variant + str(seed), rule) in done:
+                continue
+            apply_eval_rule(model, rule)
+            returns = evaluate(model, env, episodes, seed=10_000 * (seed + 1))
+            scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
+            row = {
+                "dataset": dataset,
+                "variant": variant,
+                "seed": seed,
+                "rule": rule,
+                "step": model.num_timesteps,
+                "score": round(float(np.mean(scores)), 3),
+                "score_std": round(float(np.std(scores)), 3),
+                "mean_return": round(float(np.mean(returns)), 2),
+                "eval_episodes": episodes,
+            }
+            new = not csv_path.exists()
+            with csv_path.open("a", newline="") as f:
+                writer = csv.DictWriter(f, fieldnames=REEVAL_FIELDS)
+                if new:
+                    writer.writeheader()
+                writer.writerow(row)
+            if verbose:
+                print(f"[score] re-evaluated {path.stem} under {rule}: {row['score']:.1f}")
+        env.close()
+    with csv_path.open(newline="") as f:
+        rows: list[dict[str, Any]] = [dict(r) for r in csv.DictReader(f)]
+    by_key: dict[tuple[str, str, str], list[float]] = defaultdict(list)
+    for r in rows:
+        by_key[(r["dataset"], r["variant"], r["rule"])].append(float(r["score"]))
+    lines = ["| dataset | variant | rule | score | seeds |", "|---|---|---|---|---|"]
+    for (dataset, variant, rule), values in sorted(by_key.items()):
+        per_seed = ", ".join(f"{v:.1f}" for v in values)
+        lines.append(f"| {dataset} | {variant} | {rule} | {_fmt(values)} | {per_seed} |")
+    (out / "reeval.md").write_text("\n".join(lines) + "\n")
+    return rows
 
 
 # ----------------------------------------------------------------------------------------- reports
@@ -592,6 +709,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
     parser.add_argument("--out", default="results/score", help="output folder")
     parser.add_argument("--threads", type=int, help="torch CPU threads")
+    parser.add_argument("--log-interval", type=int, help="gradient steps between rows of the training statistics")
+    parser.add_argument(
+        "--reevaluate",
+        nargs="+",
+        metavar="RULE",
+        help="evaluate the saved final models again under these rules (ema, online, candidates<N>, online-candidates<N>)",
+    )
     parser.add_argument("--report-only", action="store_true", help="only rewrite table.md and the figures from scores.csv")
     parser.add_argument("--dry-run", action="store_true", help="print the resolved configuration and the cells, run nothing")
     parser.add_argument("-v", "--verbose", type=int, default=1)
@@ -615,6 +739,12 @@ def main(argv: list[str] | None = None) -> int:
 
         th.set_num_threads(args.threads)
     device = resolve_device(args.device)
+    if args.reevaluate:
+        saved = json.loads(config_path.read_text()) if config_path.exists() else {}
+        episodes = args.eval_episodes or int(saved.get("eval_episodes", 10))
+        reevaluate(out, args.reevaluate, episodes, device, verbose=args.verbose)
+        print(f"[score] wrote {out / 'reeval.md'}")
+        return 0
     config = build_config(args, device)
     cells = [(d, v, s) for s in args.seeds for d in args.datasets for v in args.variants]
     info = {

@@ -10,6 +10,7 @@ from typing import Any, ClassVar, TypeVar
 import torch as th
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule
+from stable_baselines3.common.utils import FloatSchedule
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
@@ -53,20 +54,35 @@ def _eager_fallback(compiled: Callable[..., Any], eager: Callable[..., Any]) -> 
     return call
 
 
-def lookahead_q_objective(q: th.Tensor, alive: th.Tensor, gamma_powers: th.Tensor, top_k: int) -> tuple[th.Tensor, th.Tensor]:
+LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
+
+
+def lookahead_q_objective(
+    q: th.Tensor,
+    alive: th.Tensor,
+    gamma_powers: th.Tensor,
+    top_k: int,
+    normalization: str = "first",
+    q_scale_floor: float = 0.0,
+) -> tuple[th.Tensor, th.Tensor]:
     """``L_q`` of eq. 4 from the ensemble's Q-values along the look-ahead.
 
     :param q: ``[N, T+1, B]`` Q-values of every member at ``(s_{t+i}, a_{t+i})``
     :param alive: ``[T+1, B]`` 1 while no earlier or current look-ahead state is terminal, else 0
     :param gamma_powers: ``[T+1]`` weights ``gamma^i`` (eq. 3)
     :param top_k: number ``K`` of smallest members averaged
+    :param normalization: ``"first"``: eq. 3/4 as written, the weights ``gamma^i`` summed, so the Q term
+        weighs ``sum_i gamma^i`` (about ``T + 1``) times its ``T = 0`` weight; ``"weights"``: the weights
+        divided by their sum, so ``eta`` means the same for every ``T``
+    :param q_scale_floor: lower bound of the divisor ``mean |Q|`` (``0``: Diffusion-QL's plain batch mean)
     :return: the loss and the ``[T+1]`` mean top-K Q per step (masked)
     """
     q_top_k = q.topk(top_k, dim=0, largest=False).values.mean(dim=0)  # [T+1, B]: mean of the K smallest members
     per_step = (alive * q_top_k).mean(dim=1)  # [T+1]
     # scale-free Q term (Diffusion-QL): divide by the detached mean |Q| at the current states
-    q_scale = q_top_k[0].abs().mean().detach().clamp_min(1e-6)
-    return -(gamma_powers * per_step).sum() / q_scale, per_step
+    q_scale = q_top_k[0].abs().mean().detach().clamp_min(max(q_scale_floor, 1e-6))
+    weights = gamma_powers / gamma_powers.sum() if normalization == "weights" else gamma_powers
+    return -(weights * per_step).sum() / q_scale, per_step
 
 
 class POLA(OfflineAlgorithm):
@@ -105,7 +121,25 @@ class POLA(OfflineAlgorithm):
     :param n_critics: size ``N`` of the critic ensemble (paper: 10)
     :param top_k: number ``K`` of smallest ensemble Q-values averaged in the policy loss (eq. 4)
     :param rollout_length: look-ahead horizon ``T`` (paper ablates 0, 1, 3, 5; 0 disables the model)
-    :param eta: weight of the Q term in the actor loss (``0`` = behaviour cloning)
+    :param eta: weight of the Q term in the actor loss (``0`` = behaviour cloning): a float, or an SB3
+        ``Schedule`` of the remaining progress (1 at the start of ``learn``, 0 at the end), e.g.
+        :func:`~sb3_pola.common.schedules.warmup_schedule` for a behaviour-cloning warm-up
+    :param lookahead_normalization: ``"first"`` (eq. 3/4 as written): the ``T + 1`` weighted Q terms are
+        summed and divided by ``mean |Q|`` of the first, so the Q term's weight grows with ``T``
+        (``sum_i gamma^i``, 3.94 at ``T = 3``); ``"weights"``: also divided by ``sum_i gamma^i``, so
+        ``eta`` weighs the Q term the same for every ``T``
+    :param q_scale_floor: lower bound of the detached ``mean |Q|`` that divides the Q term. ``None``:
+        Diffusion-QL's batch mean alone. ``"auto"``: the dataset's value scale ``mean |r| / (1 - gamma)``,
+        so while the critic is immature (``|Q|`` far below the returns it will reach) its gradient pulls
+        the actor in proportion to how far it has learned, instead of at full strength from the first step.
+        A float: that floor
+    :param lookahead_uncertainty_penalty: weight ``lambda`` of a MOPO-style penalty added to ``L_q``:
+        ``lambda sum_{i>=1} w_i mean(alive * u_i)``, ``u_i`` the disagreement of the dynamics model's elites
+        on the step into ``s_{t+i}`` (RMS over state dimensions of the elites' standard deviation, in
+        standardised units), ``w_i`` the look-ahead weights; it pushes the actor away from actions whose
+        predicted consequences the model is unsure of. ``0``: off (the paper)
+    :param lookahead_uncertainty_cutoff: look-ahead states reached through a step with disagreement above
+        this value contribute no Q term, and neither do later ones (as a terminal state). ``None``: off
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False``:
         look-ahead states are detached, so each Q term only trains the action taken at its state.
@@ -151,7 +185,11 @@ class POLA(OfflineAlgorithm):
         n_critics: int = 10,
         top_k: int = 2,
         rollout_length: int = 3,
-        eta: float = 1.0,
+        eta: float | Schedule = 1.0,
+        lookahead_normalization: str = "first",
+        q_scale_floor: float | str | None = None,
+        lookahead_uncertainty_penalty: float = 0.0,
+        lookahead_uncertainty_cutoff: float | None = None,
         backprop_through_model: bool = True,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -190,10 +228,24 @@ class POLA(OfflineAlgorithm):
             raise ValueError(f"top_k must be in [1, n_critics={n_critics}], got {top_k}")
         if rollout_length < 0:
             raise ValueError(f"rollout_length must be >= 0, got {rollout_length}")
+        if lookahead_normalization not in LOOKAHEAD_NORMALIZATIONS:
+            raise ValueError(
+                f"lookahead_normalization must be one of {LOOKAHEAD_NORMALIZATIONS}, got {lookahead_normalization!r}"
+            )
+        if isinstance(q_scale_floor, str) and q_scale_floor != "auto":
+            raise ValueError(f"q_scale_floor must be None, 'auto' or a float, got {q_scale_floor!r}")
+        if lookahead_uncertainty_penalty < 0:
+            raise ValueError(f"lookahead_uncertainty_penalty must be >= 0, got {lookahead_uncertainty_penalty}")
         self.n_critics = n_critics
         self.top_k = top_k
         self.rollout_length = rollout_length
         self.eta = eta
+        self.lookahead_normalization = lookahead_normalization
+        self.q_scale_floor = q_scale_floor
+        # the floor's value: q_scale_floor, or the dataset's value scale once the data are loaded ("auto")
+        self.q_scale_floor_value: float | None = None if q_scale_floor == "auto" else float(q_scale_floor or 0.0)
+        self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
+        self.lookahead_uncertainty_cutoff = lookahead_uncertainty_cutoff
         self.backprop_through_model = backprop_through_model
         self.n_diffusion_steps = n_diffusion_steps
         self.beta_schedule = beta_schedule
@@ -214,6 +266,7 @@ class POLA(OfflineAlgorithm):
 
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
+        self.eta_schedule = FloatSchedule(self.eta)
         self.set_random_seed(self.seed)
         self._termination_fn: TerminationFn | None = get_termination_fn(self.env_id)
         dynamics_kwargs = None
@@ -237,6 +290,7 @@ class POLA(OfflineAlgorithm):
             self.policy.set_normalization(mean, std)
         self._create_aliases()
         self._gamma_powers = th.tensor([self.gamma**i for i in range(self.rollout_length + 1)], device=self.device)
+        self._eta_value = th.zeros((), device=self.device)  # this step's eta, a tensor so a compiled graph reads it
 
     @property
     def _cudagraphs(self) -> bool:
@@ -255,7 +309,9 @@ class POLA(OfflineAlgorithm):
             "critic_target",
             "_termination_fn",
             "_gamma_powers",
+            "_eta_value",
             "_compiled_loss_fns",
+            "eta_schedule",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -263,6 +319,9 @@ class POLA(OfflineAlgorithm):
 
     # ------------------------------------------------------------------ dynamics model
     def _before_training(self, progress_bar: bool = False) -> None:
+        if self.q_scale_floor_value is None:  # "auto": the value scale of the dataset's rewards
+            rewards = self._setup_offline_data().rewards
+            self.q_scale_floor_value = float(rewards.abs().mean()) / (1.0 - self.gamma)
         dynamics = self.policy.dynamics
         if dynamics is None:
             return
@@ -305,8 +364,9 @@ class POLA(OfflineAlgorithm):
         critic_grad_norm = self._clip(self.critic.parameters())
         self.critic.optimizer.step()
 
+        self._eta_value.fill_(float(self.eta_schedule(self._current_progress_remaining)))
         with self._critic_frozen():
-            actor_loss, actor_stats = actor_loss_fn(obs, actions)
+            actor_loss, actor_stats = actor_loss_fn(obs, actions, self._eta_value)
         self.actor.optimizer.zero_grad(set_to_none=True)
         actor_loss.backward()
         actor_grad_norm = self._clip(self.actor.parameters())
@@ -352,18 +412,23 @@ class POLA(OfflineAlgorithm):
         q = current_q.detach()
         return critic_loss, {"q_mean": q.mean(), "q_ensemble_std": q.std(dim=0).mean(), "target_q": target_q.mean()}
 
-    def _actor_loss(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
-        """``L_d + eta * L_q`` (eq. 6 and eq. 3/4)."""
+    @property
+    def _behaviour_cloning(self) -> bool:
+        """``eta`` is the constant 0: no Q term to build."""
+        return not callable(self.eta) and float(self.eta) == 0.0
+
+    def _actor_loss(self, obs: th.Tensor, actions: th.Tensor, eta: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """``L_d + eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor)."""
         features = self.policy.actor_features(obs)
         bc_loss = self.actor.loss(actions, features)
         stats: dict[str, th.Tensor] = {}
-        if self.eta != 0:
+        if not self._behaviour_cloning:
             q_loss, stats = self._lookahead_q_loss(obs, features)
-            actor_loss = bc_loss + self.eta * q_loss
+            actor_loss = bc_loss + eta * q_loss
         else:
             q_loss = th.zeros((), device=obs.device)
             actor_loss = bc_loss
-        return actor_loss, {"bc_loss": bc_loss.detach(), "q_loss": q_loss.detach(), **stats}
+        return actor_loss, {"bc_loss": bc_loss.detach(), "q_loss": q_loss.detach(), "eta": eta.detach().clone(), **stats}
 
     def _loss_fns(self) -> tuple[Any, Any]:
         """The critic and actor loss functions: the methods themselves, or their ``torch.compile``'d graphs.
@@ -392,15 +457,21 @@ class POLA(OfflineAlgorithm):
         policy, horizon = self.policy, self.rollout_length
         batch_size = obs.shape[0]
         action = self.actor.sample(features)  # a_t = pi(s_t), differentiable through the reverse chain
+        saturation = (action.detach().abs() > 0.99).float().mean()
         states, actions_, alive = [obs], [action], [th.ones(batch_size, device=obs.device)]
+        disagreements: list[th.Tensor] = []  # [B] per look-ahead step, the model's doubt about s_{t+i}
         state = obs
         for _ in range(horizon):
             assert policy.dynamics is not None
-            next_state, _, terminal_prob = policy.dynamics.step(state, action)
+            next_state, _, terminal_prob, disagreement = policy.dynamics.step(state, action)
             if self._termination_fn is not None:
                 terminal = self._termination_fn(state, action, next_state).float()
             else:
                 terminal = terminal_prob.detach()
+            if self.lookahead_uncertainty_cutoff is not None:  # too uncertain a prediction ends the look-ahead
+                terminal = th.maximum(terminal, (disagreement.detach() > self.lookahead_uncertainty_cutoff).float())
+            # the penalty of the step into s_{t+i} counts while s_{t+i-1} is alive
+            disagreements.append(alive[-1] * disagreement)
             alive.append(alive[-1] * (1.0 - terminal))
             state = next_state if self.backprop_through_model else next_state.detach()
             action = self.actor.sample(policy.actor_features(state))  # a_{t+i} = pi(s_{t+i})
@@ -411,10 +482,24 @@ class POLA(OfflineAlgorithm):
         q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
         alive_mask = th.stack(alive)  # [T+1, B]
         q_loss, per_step = lookahead_q_objective(
-            q.view(-1, horizon + 1, batch_size), alive_mask, self._gamma_powers, self.top_k
+            q.view(-1, horizon + 1, batch_size),
+            alive_mask,
+            self._gamma_powers,
+            self.top_k,
+            normalization=self.lookahead_normalization,
+            q_scale_floor=self.q_scale_floor_value or 0.0,
         )
         stats = {f"lookahead_q_{i}": per_step[i].detach() for i in range(horizon + 1)}
+        stats["action_saturation"] = saturation
         stats["lookahead_alive"] = alive_mask[-1].mean()
+        if horizon > 0:
+            doubt = th.stack(disagreements).mean(dim=1)  # [T]
+            if self.lookahead_uncertainty_penalty > 0:
+                weights = self._gamma_powers[1:]
+                if self.lookahead_normalization == "weights":
+                    weights = weights / self._gamma_powers.sum()
+                q_loss = q_loss + self.lookahead_uncertainty_penalty * (weights * doubt).sum()
+            stats.update({f"lookahead_uncertainty_{i + 1}": doubt[i].detach() for i in range(horizon)})
         return q_loss, stats
 
     def _clip(self, parameters: Any) -> th.Tensor:

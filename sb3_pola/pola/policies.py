@@ -301,6 +301,8 @@ class POLAPolicy(BasePolicy):
     :param time_embedding_dim: size of the diffusion-step embedding
     :param n_action_samples: candidate actions per state in ``predict``
     :param predict_seed: seed of the candidates' noise in deterministic ``predict`` with ``n_action_samples > 1``
+    :param predict_actor: the actor ``predict`` samples from: ``"ema"`` (Diffusion-QL's evaluation) or
+        ``"online"`` (the trained actor itself; the EMA lags it by about ``1 / (1 - ema_decay)`` updates)
     :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`; ``None`` builds no model
     :param compile_activations: run Mish through a kernel fused by ``torch.compile``
         (:mod:`sb3_pola.common.activations`; same function, float rounding aside, eager fallback)
@@ -329,6 +331,7 @@ class POLAPolicy(BasePolicy):
         time_embedding_dim: int = 16,
         n_action_samples: int = 1,
         predict_seed: int = 0,
+        predict_actor: str = "ema",
         dynamics_kwargs: dict[str, Any] | None = None,
         compile_activations: bool = False,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
@@ -356,6 +359,9 @@ class POLAPolicy(BasePolicy):
             actor_arch, critic_arch = net_arch, net_arch
         if n_action_samples < 1:
             raise ValueError(f"n_action_samples must be >= 1, got {n_action_samples}")
+        if predict_actor not in ("ema", "online"):
+            raise ValueError(f"predict_actor must be 'ema' or 'online', got {predict_actor!r}")
+        self.predict_actor = predict_actor
         self.net_arch = net_arch
         self.activation_fn = activation_fn
         self.n_critics = n_critics
@@ -411,6 +417,7 @@ class POLAPolicy(BasePolicy):
             time_embedding_dim=self.time_embedding_dim,
             n_action_samples=self.n_action_samples,
             predict_seed=self.predict_seed,
+            predict_actor=self.predict_actor,
             dynamics_kwargs=self.dynamics_kwargs,
             compile_activations=self.compile_activations,
             lr_schedule=self._dummy_schedule,
@@ -436,15 +443,16 @@ class POLAPolicy(BasePolicy):
         assert isinstance(observation, th.Tensor)
         obs = observation.float()
         n = self.n_action_samples
+        actor = self.actor_ema if self.predict_actor == "ema" else self.actor
         if n == 1:
-            return self.actor_ema.sample(self.actor_features(obs), deterministic=deterministic)
+            return actor.sample(self.actor_features(obs), deterministic=deterministic)
         generator = None
         if deterministic:
             generator = th.Generator(device=obs.device)
             generator.manual_seed(self.predict_seed)
         batch_size = obs.shape[0]
         obs_rep = obs.repeat_interleave(n, dim=0)  # [B * n, obs]
-        actions = self.actor_ema.sample(self.actor_features(obs_rep), generator=generator)  # [B * n, A]
+        actions = actor.sample(self.actor_features(obs_rep), generator=generator)  # [B * n, A]
         q = self.critic_target(obs_rep, actions).min(dim=0).values.view(batch_size, n)  # [B, n]
         if deterministic:
             idx = q.argmax(dim=1)
