@@ -17,7 +17,7 @@ PYTEST_ARGS ?=
 # one torch thread by default (the README's figures); e.g. BENCH_ARGS="--device cuda" on a GPU
 BENCH_ARGS ?= --threads 1
 
-.PHONY: install train test test-all lint format type bench bench-quick score clean
+.PHONY: install train test test-all lint format type bench bench-quick score peers clean
 
 install: $(STAMP)
 
@@ -60,6 +60,11 @@ bench-quick: $(STAMP)
 score: $(STAMP)
 	$(PY) -m sb3_pola.cli score $(SCORE_ARGS)
 
+# d3rlpy baselines into score's folder (table.md gets them); d3rlpy lives in its own venv, made on first use
+PEERS_ARGS ?=
+peers: $(STAMP)
+	$(PY) -m sb3_pola.cli peers $(PEERS_ARGS)
+
 clean:
-	rm -rf $(VENV) build dist *.egg-info .pytest_cache .mypy_cache .ruff_cache outputs
+	rm -rf $(VENV) .venv-peers build dist *.egg-info .pytest_cache .mypy_cache .ruff_cache outputs
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -14,6 +14,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "optimize": ("sb3_pola.zoo", "rl-zoo3 hyperparameter search with POLA's sampler"),
     "bench": ("sb3_pola.benchmarks.bench", "speed and memory benchmarks"),
     "score": ("sb3_pola.experiments.score", "score benchmark: POLA and its ablations over datasets and seeds"),
+    "peers": ("sb3_pola.experiments.peers", "d3rlpy baselines (TD3+BC, IQL, BC) for the score table"),
     "datasets": ("sb3_pola.common.datasets", "list the Minari datasets found locally"),
 }
 

@@ -1,0 +1,415 @@
+"""One d3rlpy baseline cell of ``sb3-pola peers``, run by the peers venv's Python (d3rlpy 2.8.1, gymnasium 1.0).
+
+This file is a script, not part of the package's import graph: it imports only the standard
+library, numpy, gymnasium, torch and d3rlpy (never ``sb3_pola``), so the separate virtual
+environment that holds d3rlpy can run it directly::
+
+    .venv-peers/bin/python peers_worker.py --npz data.npz --algo td3bc --seed 0 --steps 10000 \\
+        --eval-freq 2000 --eval-episodes 10 --csv out/peers.csv --dataset halfcheetah/medium-v0
+
+Data. ``--npz`` is written by ``sb3_pola.experiments.peers.export_dataset`` from our
+``OfflineDataset``: flat transitions (``observations``, ``actions`` in [-1, 1], ``rewards``,
+``next_observations``, ``terminals``, ``timeouts``) where every episode ends with exactly one of
+``terminals`` (the env terminated) or ``timeouts`` (truncated, or cut by the end of the data).
+
+d3rlpy 2.x has no next-observation input: ``MDPDataset`` cuts episodes after each terminal or
+timeout flag and its ``BasicTransitionPicker`` pairs step ``i`` with observation ``i + 1`` of the
+same episode; the last step of a terminated episode gets a zero next observation (masked by its
+terminal flag), and the last step of a timed-out episode is *not a transition* (it has no next
+observation). Fed our flat arrays as they are, that would drop the last transition of every
+truncated episode. :func:`prepare_episode_arrays` therefore appends to each timed-out episode one
+extra row holding its final next observation (zero action and reward, the timeout flag moved onto
+it): d3rlpy then sees exactly our transitions, each paired with the dataset's own next observation,
+and never with the first observation of the next episode. :func:`check_alignment` verifies this on
+the built dataset through d3rlpy's own transition picker before every training run.
+
+Evaluation is ``sb3-pola score``'s protocol: deterministic actions (d3rlpy's ``predict``), episode
+``i`` reset with seed ``10_000 * (seed + 1) + i``, actions mapped from [-1, 1] to the env's bounds,
+score ``100 (R - ref_min) / (ref_max - ref_min)`` per episode, mean and std over the episodes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import pathlib
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+# must match sb3_pola.experiments.score.CSV_FIELDS (a test checks it)
+CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s"]
+VARIANT_NAMES = {"td3bc": "d3rlpy-TD3+BC", "iql": "d3rlpy-IQL", "bc": "d3rlpy-BC"}
+# the npz arrays of one transition each
+TRANSITION_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")
+
+
+# ----------------------------------------------------------------------------------------- data (numpy only)
+
+
+def load_npz(path: str | os.PathLike) -> dict[str, Any]:
+    """The arrays and metadata of an exported dataset (strings and scalars unwrapped)."""
+    with np.load(path, allow_pickle=False) as data:
+        out: dict[str, Any] = {name: data[name] for name in data.files}
+    for key in ("dataset_id", "env_id", "env_kwargs"):
+        if key in out:
+            out[key] = str(out[key])
+    for key in ("ref_min_score", "ref_max_score"):
+        if key in out:
+            value = float(out[key])
+            out[key] = None if np.isnan(value) else value
+    if "max_episode_steps" in out:
+        steps = int(out["max_episode_steps"])
+        out["max_episode_steps"] = None if steps <= 0 else steps
+    return out
+
+
+def episode_ends(terminals: np.ndarray, timeouts: np.ndarray) -> np.ndarray:
+    """Indices of the last step of each episode (a terminal or a timeout flag; never both)."""
+    terminals, timeouts = np.asarray(terminals) > 0, np.asarray(timeouts) > 0
+    if np.any(terminals & timeouts):
+        raise ValueError("a step is flagged both terminal and timeout")
+    if len(terminals) and not (terminals[-1] or timeouts[-1]):
+        raise ValueError("the last step ends no episode (neither terminal nor timeout)")
+    return np.flatnonzero(terminals | timeouts)
+
+
+def prepare_episode_arrays(
+    observations: np.ndarray,
+    actions: np.ndarray,
+    rewards: np.ndarray,
+    next_observations: np.ndarray,
+    terminals: np.ndarray,
+    timeouts: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """Arrays for ``d3rlpy.dataset.MDPDataset`` whose transitions are exactly the given ones.
+
+    Each episode that ends by a timeout gets one extra row: its final next observation, a zero
+    action and reward, and the timeout flag (moved from its last real step). d3rlpy does not make
+    a transition of an episode's last row unless it is terminal, so the extra row only supplies the
+    next observation of the real last step. Terminated episodes are passed unchanged (d3rlpy
+    pairs their last step with a zero observation, which the terminal flag masks).
+
+    :return: ``observations``, ``actions``, ``rewards`` (``[M, 1]``), ``terminals``, ``timeouts``
+        (float32), ``rows`` (``[M]``, index of each row's transition in the input, -1 for extra rows)
+    """
+    observations = np.asarray(observations, dtype=np.float32)
+    next_observations = np.asarray(next_observations, dtype=np.float32)
+    actions = np.asarray(actions, dtype=np.float32)
+    rewards = np.asarray(rewards, dtype=np.float32).reshape(-1)
+    n = len(rewards)
+    ends = episode_ends(terminals, timeouts)
+    timed_out = np.asarray(timeouts)[ends] > 0
+    pad_after = ends[timed_out]  # an extra row after each of these steps
+    # position of every input row in the output: shifted by the extra rows inserted before it
+    shift = np.searchsorted(pad_after, np.arange(n), side="left")
+    pos = np.arange(n) + shift
+    pad_pos = pad_after + np.arange(len(pad_after)) + 1
+    m = n + len(pad_after)
+    out_obs = np.empty((m, *observations.shape[1:]), dtype=np.float32)
+    out_act = np.zeros((m, *actions.shape[1:]), dtype=np.float32)
+    out_rew = np.zeros((m, 1), dtype=np.float32)
+    out_term = np.zeros(m, dtype=np.float32)
+    out_timeout = np.zeros(m, dtype=np.float32)
+    rows = np.full(m, -1, dtype=np.int64)
+    out_obs[pos] = observations
+    out_act[pos] = actions
+    out_rew[pos, 0] = rewards
+    out_term[pos] = np.asarray(terminals, dtype=np.float32)
+    rows[pos] = np.arange(n)
+    out_obs[pad_pos] = next_observations[pad_after]
+    out_timeout[pad_pos] = 1.0
+    return {
+        "observations": out_obs,
+        "actions": out_act,
+        "rewards": out_rew,
+        "terminals": out_term,
+        "timeouts": out_timeout,
+        "rows": rows,
+    }
+
+
+def check_alignment(dataset: Any, arrays: dict[str, np.ndarray]) -> int:
+    """Check every transition d3rlpy's transition picker makes of ``dataset`` against the exported arrays.
+
+    Transitions are visited in order (episode by episode), so the ``k``-th must be row ``k`` of the
+    export: same observation, action, reward and terminal flag, and the dataset's own next
+    observation (a zero one on terminal steps, which d3rlpy masks).
+
+    :param dataset: a d3rlpy ``ReplayBuffer`` (``MDPDataset``)
+    :param arrays: the exported arrays (:func:`load_npz`)
+    :return: the number of transitions checked (all of them)
+    """
+    picker = dataset.transition_picker
+    k = 0
+    n = len(arrays["rewards"])
+    for episode in dataset.episodes:
+        for i in range(episode.transition_count):
+            if k >= n:
+                raise AssertionError(f"d3rlpy makes more transitions than the {n} exported")
+            t = picker(episode, i)
+            terminal = float(arrays["terminals"][k]) > 0
+            expected_next = np.zeros_like(arrays["next_observations"][k]) if terminal else arrays["next_observations"][k]
+            if not (
+                np.array_equal(t.observation, arrays["observations"][k])
+                and np.array_equal(t.action, arrays["actions"][k])
+                and float(np.asarray(t.reward).reshape(-1)[0]) == float(arrays["rewards"][k])
+                and float(t.terminal) == float(terminal)
+                and np.array_equal(t.next_observation, expected_next)
+            ):
+                raise AssertionError(f"d3rlpy's transition {k} (episode step {i}) differs from the exported transition {k}")
+            k += 1
+    if k != n:
+        raise AssertionError(f"d3rlpy makes {k} transitions of the {n} exported")
+    return k
+
+
+# ----------------------------------------------------------------------------------------- d3rlpy
+
+
+def hyperparameters(algo: str, steps: int) -> dict[str, Any]:
+    """The d3rlpy settings of each baseline: d3rlpy's defaults, plus what its reproduction scripts add.
+
+    - TD3+BC: ``reproductions/offline/td3_plus_bc.py`` (the paper's alpha 2.5, states standardised);
+    - IQL: ``reproductions/offline/iql.py`` (rewards scaled by 1000 / (max - min episode return),
+      actor learning rate cosine-annealed over the run: ``T_max`` is our step budget);
+    - BC: ``BCConfig()`` as it is (deterministic policy, mean squared error).
+    """
+    if algo == "td3bc":
+        return {
+            "actor_learning_rate": 3e-4,
+            "critic_learning_rate": 3e-4,
+            "batch_size": 256,
+            "gamma": 0.99,
+            "tau": 0.005,
+            "n_critics": 2,
+            "target_smoothing_sigma": 0.2,
+            "target_smoothing_clip": 0.5,
+            "alpha": 2.5,
+            "update_actor_interval": 2,
+            "observation_scaler": "StandardObservationScaler()",
+        }
+    if algo == "iql":
+        return {
+            "actor_learning_rate": 3e-4,
+            "critic_learning_rate": 3e-4,
+            "batch_size": 256,
+            "gamma": 0.99,
+            "tau": 0.005,
+            "n_critics": 2,
+            "expectile": 0.7,
+            "weight_temp": 3.0,
+            "max_weight": 100.0,
+            "reward_scaler": "ReturnBasedRewardScaler(multiplier=1000.0)",
+            "actor_lr_schedule": f"CosineAnnealingLR(T_max={steps})",
+        }
+    if algo == "bc":
+        return {"batch_size": 100, "learning_rate": 1e-3, "policy_type": "deterministic"}
+    raise ValueError(f"unknown algorithm {algo!r}: one of {', '.join(VARIANT_NAMES)}")
+
+
+def make_algo(algo: str, steps: int, device: str = "cpu:0") -> Any:
+    """The d3rlpy algorithm of :func:`hyperparameters`."""
+    import d3rlpy
+
+    hp = hyperparameters(algo, steps)
+    if algo == "td3bc":
+        kwargs = {k: v for k, v in hp.items() if k != "observation_scaler"}
+        return d3rlpy.algos.TD3PlusBCConfig(
+            **kwargs, observation_scaler=d3rlpy.preprocessing.StandardObservationScaler()
+        ).create(device=device)
+    if algo == "iql":
+        kwargs = {k: v for k, v in hp.items() if k not in ("reward_scaler", "actor_lr_schedule")}
+        return d3rlpy.algos.IQLConfig(
+            **kwargs,
+            actor_optim_factory=d3rlpy.optimizers.AdamFactory(
+                lr_scheduler_factory=d3rlpy.optimizers.CosineAnnealingLRFactory(T_max=steps)
+            ),
+            reward_scaler=d3rlpy.preprocessing.ReturnBasedRewardScaler(multiplier=1000.0),
+        ).create(device=device)
+    return d3rlpy.algos.BCConfig(**hp).create(device=device)
+
+
+def build_dataset(arrays: dict[str, np.ndarray]) -> Any:
+    """A d3rlpy ``MDPDataset`` of the exported transitions (see :func:`prepare_episode_arrays`)."""
+    import d3rlpy
+
+    prepared = prepare_episode_arrays(*(arrays[name] for name in TRANSITION_FIELDS))
+    return d3rlpy.dataset.MDPDataset(
+        observations=prepared["observations"],
+        actions=prepared["actions"],
+        rewards=prepared["rewards"],
+        terminals=prepared["terminals"],
+        timeouts=prepared["timeouts"],
+        action_space=d3rlpy.ActionSpace.CONTINUOUS,
+        action_size=int(arrays["actions"].shape[1]),
+    )
+
+
+def make_env(meta: dict[str, Any]) -> Any:
+    """The dataset's environment (its id, time limit and keyword arguments from the export)."""
+    import gymnasium as gym
+
+    kwargs = json.loads(meta.get("env_kwargs") or "{}")
+    return gym.make(meta["env_id"], max_episode_steps=meta.get("max_episode_steps"), **kwargs)
+
+
+def unscale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """[-1, 1] -> the env's bounds (clipped to [-1, 1] first, as the policies' tanh already is)."""
+    return low + 0.5 * (np.clip(action, -1.0, 1.0) + 1.0) * (high - low)
+
+
+def evaluate(algo: Any, env: Any, n_episodes: int, seed: int, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Returns of ``n_episodes`` deterministic episodes; episode ``i`` is reset with ``seed + i`` (score's protocol)."""
+    returns = np.zeros(n_episodes)
+    for i in range(n_episodes):
+        obs, _ = env.reset(seed=seed + i)
+        done = False
+        while not done:
+            action = algo.predict(np.asarray(obs, dtype=np.float32)[None])[0]
+            obs, reward, terminated, truncated, _ = env.step(unscale_action(action, low, high).astype(env.action_space.dtype))
+            returns[i] += float(reward)
+            done = bool(terminated or truncated)
+    return returns
+
+
+def normalized_scores(returns: np.ndarray, ref_min: float | None, ref_max: float | None) -> np.ndarray:
+    """Per-episode D4RL scores ``100 (R - ref_min) / (ref_max - ref_min)`` (NaN without reference scores)."""
+    if ref_min is None or ref_max is None or ref_max == ref_min:
+        return np.full(len(returns), np.nan)
+    return 100.0 * (np.asarray(returns, dtype=np.float64) - ref_min) / (ref_max - ref_min)
+
+
+def append_row(csv_path: pathlib.Path, row: dict[str, Any]) -> None:
+    new = not csv_path.exists() or csv_path.stat().st_size == 0
+    with csv_path.open("a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        if new:
+            writer.writeheader()
+        writer.writerow({k: row[k] for k in CSV_FIELDS})
+        f.flush()
+
+
+def versions() -> dict[str, str]:
+    """Versions of the libraries this worker runs with."""
+    import d3rlpy
+    import gymnasium
+    import torch
+
+    info = {"d3rlpy": d3rlpy.__version__, "torch": torch.__version__, "gymnasium": gymnasium.__version__}
+    info["numpy"] = np.__version__
+    try:
+        import mujoco
+
+        info["mujoco"] = mujoco.__version__
+    except ImportError:
+        pass
+    info["python"] = sys.version.split()[0]
+    return info
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Train one (dataset, algorithm, seed) cell, appending an evaluation row to ``--csv`` every ``--eval-freq`` steps."""
+    import d3rlpy
+    import torch
+
+    torch.set_num_threads(args.threads)
+    meta = load_npz(args.npz)
+    dataset_id = args.dataset or meta["dataset_id"]
+    variant = VARIANT_NAMES[args.algo]
+    dataset = build_dataset(meta)
+    n_checked = check_alignment(dataset, meta)
+    print(f"[peers] {dataset_id}: {n_checked} transitions in {len(dataset.episodes)} episodes, aligned with the export")
+    d3rlpy.seed(args.seed)
+    algo = make_algo(args.algo, args.steps)
+    env = make_env(meta)
+    low, high = meta["action_low"].astype(np.float64), meta["action_high"].astype(np.float64)
+    csv_path = pathlib.Path(args.csv)
+    start = time.perf_counter()
+
+    def callback(algo: Any, epoch: int, step: int) -> None:
+        if step % args.eval_freq != 0 and step != args.steps:
+            return
+        returns = evaluate(algo, env, args.eval_episodes, 10_000 * (args.seed + 1), low, high)
+        scores = normalized_scores(returns, meta.get("ref_min_score"), meta.get("ref_max_score"))
+        row = {
+            "dataset": dataset_id,
+            "variant": variant,
+            "seed": args.seed,
+            "step": step,
+            "score": round(float(np.mean(scores)), 3),
+            "score_std": round(float(np.std(scores)), 3),
+            "mean_return": round(float(np.mean(returns)), 2),
+            "eval_episodes": args.eval_episodes,
+            "wall_s": round(time.perf_counter() - start, 1),
+        }
+        append_row(csv_path, row)
+        print(f"[peers] {dataset_id} {variant} seed {args.seed} step {step}: score {row['score']:.1f} ", end="")
+        print(f"(return {row['mean_return']:.0f}), {row['wall_s']:.0f}s", flush=True)
+
+    algo.fit(
+        dataset,
+        n_steps=args.steps,
+        n_steps_per_epoch=args.steps,
+        show_progress=False,
+        save_interval=args.steps + 1,
+        logger_adapter=d3rlpy.logging.NoopAdapterFactory(),
+        callback=callback,
+    )
+    env.close()
+    return {
+        "dataset": dataset_id,
+        "variant": variant,
+        "algo": args.algo,
+        "seed": args.seed,
+        "steps": args.steps,
+        "eval_freq": args.eval_freq,
+        "eval_episodes": args.eval_episodes,
+        "wall_s": round(time.perf_counter() - start, 1),
+        "transitions": n_checked,
+        "hyperparameters": hyperparameters(args.algo, args.steps),
+        "versions": versions(),
+    }
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description="One d3rlpy baseline cell of sb3-pola peers.")
+    parser.add_argument("--npz", help="dataset exported by sb3_pola.experiments.peers")
+    parser.add_argument("--algo", choices=list(VARIANT_NAMES), default="td3bc")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=int, default=10_000)
+    parser.add_argument("--eval-freq", type=int, default=2_000)
+    parser.add_argument("--eval-episodes", type=int, default=10)
+    parser.add_argument("--csv", help="CSV the evaluation rows are appended to")
+    parser.add_argument("--dataset", help="dataset id written in the rows (default: the export's)")
+    parser.add_argument("--result", help="JSON file written at the end (hyperparameters, versions, wall time)")
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    parser.add_argument("--versions", action="store_true", help="print the library versions as JSON and exit")
+    args = parser.parse_args(argv)
+    if not args.versions and (args.npz is None or args.csv is None):
+        parser.error("--npz and --csv are required")
+    if args.steps < 1 or args.eval_freq < 1 or args.eval_episodes < 1:
+        parser.error("--steps, --eval-freq and --eval-episodes must be positive")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    if args.versions:
+        print(json.dumps(versions()))
+        return 0
+    result = run(args)
+    if args.result:
+        path = pathlib.Path(args.result)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(result, indent=1))
+        tmp.replace(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
