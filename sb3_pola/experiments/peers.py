@@ -18,9 +18,11 @@ environment:
 3. rewrites ``<out>/table.md`` and the figures (``score``'s reports, which add the baselines when
    ``peers.csv`` is there; ``--out`` defaults to ``score``'s folder for that reason).
 
-Finished cells are skipped (``<out>/peers_cells/<cell>.json``); an interrupted cell is run again
-from its start (its rows are dropped first). ``<out>/peers_config.json`` records the budget, the
-library versions of the peers venv and the machine; ``<out>/peers_logs/`` the workers' output.
+Finished cells are skipped (``<out>/peers_cells/<cell>.json``); an interrupted cell continues from
+its last evaluation (``<out>/peers_ckpt/<cell>.pkl``: model, optimisers, gradient step and random
+states; the continued run matches an uninterrupted one), its later rows dropped.
+``<out>/peers_config.json`` records the budget, the library versions of the peers venv and the
+machine; ``<out>/peers_logs/`` the workers' output.
 """
 
 from __future__ import annotations
@@ -169,15 +171,6 @@ def cell_name(dataset: str, algo: str, seed: int) -> str:
     return f"{score.slug(dataset)}__d3rlpy-{algo}__seed{seed}"
 
 
-def drop_cell_rows(csv_path: pathlib.Path, dataset: str, variant: str, seed: int) -> int:
-    """Remove a cell's rows from ``peers.csv`` (a cell that is run again starts from scratch); returns how many."""
-    rows = score.read_rows(csv_path)
-    kept = [r for r in rows if (r["dataset"], r["variant"], r["seed"]) != (dataset, variant, seed)]
-    if len(kept) != len(rows):
-        score.write_rows(csv_path, kept)
-    return len(rows) - len(kept)
-
-
 def worker_env(threads: int) -> dict[str, str]:
     """The worker's environment: one BLAS/OpenMP thread per torch thread, nothing of this venv's Python path."""
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
@@ -196,12 +189,13 @@ def run_cell(
     args: argparse.Namespace,
     out: pathlib.Path,
 ) -> dict[str, Any]:
-    """Run one cell in the peers venv; its rows go to ``<out>/peers.csv``, its marker to ``<out>/peers_cells/``."""
+    """Run one cell in the peers venv; its rows go to ``<out>/peers.csv``, its marker to ``<out>/peers_cells/``.
+
+    The worker resumes from ``<out>/peers_ckpt/<cell>.pkl`` if an interrupted run left one, and drops the
+    cell's rows that its checkpoint does not cover.
+    """
     name = cell_name(dataset, algo, seed)
     csv_path = out / "peers.csv"
-    dropped = drop_cell_rows(csv_path, dataset, VARIANT_NAMES[algo], seed)
-    if dropped and args.verbose:
-        print(f"[peers] {name}: an interrupted run left {dropped} rows, dropped; starting again")
     log_dir, cells = out / "peers_logs", out / "peers_cells"
     log_dir.mkdir(parents=True, exist_ok=True)
     cells.mkdir(parents=True, exist_ok=True)
@@ -209,8 +203,9 @@ def run_cell(
     command = [str(python), str(WORKER), "--npz", str(npz), "--algo", algo, "--seed", str(seed)]
     command += ["--steps", str(args.steps), "--eval-freq", str(args.eval_freq), "--eval-episodes", str(args.eval_episodes)]
     command += ["--csv", str(csv_path), "--dataset", dataset, "--result", str(result), "--threads", str(args.threads)]
+    command += ["--ckpt", str(out / "peers_ckpt" / f"{name}.pkl")]
     start = time.perf_counter()
-    with (log_dir / f"{name}.log").open("w") as log:
+    with (log_dir / f"{name}.log").open("a") as log:
         process = subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=worker_env(args.threads)
         )

@@ -23,6 +23,11 @@ it): d3rlpy then sees exactly our transitions, each paired with the dataset's ow
 and never with the first observation of the next episode. :func:`check_alignment` verifies this on
 the built dataset through d3rlpy's own transition picker before every training run.
 
+Resume: with ``--ckpt``, the model, its optimisers, the gradient step and the random states are
+saved at every evaluation; a run started again with the same arguments continues from there (the
+cell's rows after that step are dropped from ``--csv``), otherwise its rows are dropped and it starts
+from scratch.
+
 Evaluation is ``sb3-pola score``'s protocol: deterministic actions (d3rlpy's ``predict``), episode
 ``i`` reset with seed ``10_000 * (seed + 1) + i``, actions mapped from [-1, 1] to the env's bounds,
 score ``100 (R - ref_min) / (ref_max - ref_min)`` per episode, mean and std over the episodes.
@@ -32,9 +37,12 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import os
 import pathlib
+import pickle
+import random
 import sys
 import time
 from typing import Any
@@ -284,6 +292,45 @@ def normalized_scores(returns: np.ndarray, ref_min: float | None, ref_max: float
     return 100.0 * (np.asarray(returns, dtype=np.float64) - ref_min) / (ref_max - ref_min)
 
 
+def eval_row(
+    algo: Any, env: Any, meta: dict[str, Any], dataset_id: str, variant: str, seed: int, step: int, episodes: int
+) -> dict[str, Any]:
+    """One evaluation as a CSV row (``wall_s`` left to the caller): reset seeds ``10_000 * (seed + 1) + i``, as score's."""
+    returns = evaluate(algo, env, episodes, 10_000 * (seed + 1), meta["action_low"], meta["action_high"])
+    scores = normalized_scores(returns, meta.get("ref_min_score"), meta.get("ref_max_score"))
+    return {
+        "dataset": dataset_id,
+        "variant": variant,
+        "seed": seed,
+        "step": step,
+        "score": round(float(np.mean(scores)), 3),
+        "score_std": round(float(np.std(scores)), 3),
+        "mean_return": round(float(np.mean(returns)), 2),
+        "eval_episodes": episodes,
+    }
+
+
+def drop_rows(csv_path: pathlib.Path, dataset: str, variant: str, seed: int, after_step: int = 0) -> int:
+    """Remove a cell's rows of steps above ``after_step`` from the CSV (atomically); returns how many."""
+    if not csv_path.exists():
+        return 0
+    with csv_path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    kept = [
+        r
+        for r in rows
+        if (r["dataset"], r["variant"], int(r["seed"])) != (dataset, variant, seed) or int(r["step"]) <= after_step
+    ]
+    if len(kept) != len(rows):
+        tmp = csv_path.with_suffix(".tmp")
+        with tmp.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+            writer.writeheader()
+            writer.writerows({k: r[k] for k in CSV_FIELDS} for r in kept)
+        tmp.replace(csv_path)
+    return len(rows) - len(kept)
+
+
 def append_row(csv_path: pathlib.Path, row: dict[str, Any]) -> None:
     new = not csv_path.exists() or csv_path.stat().st_size == 0
     with csv_path.open("a", newline="") as f:
@@ -312,6 +359,57 @@ def versions() -> dict[str, str]:
     return info
 
 
+def random_states() -> dict[str, Any]:
+    """The states of the generators d3rlpy draws from (numpy's global one samples the minibatches)."""
+    import torch
+
+    numpy_state = np.random.get_state()  # noqa: NPY002 (d3rlpy samples from numpy's legacy global generator)
+    return {"python": random.getstate(), "numpy": numpy_state, "torch": torch.get_rng_state().numpy()}
+
+
+def set_random_states(states: dict[str, Any]) -> None:
+    import torch
+
+    random.setstate(states["python"])
+    np.random.set_state(states["numpy"])  # noqa: NPY002
+    torch.set_rng_state(torch.from_numpy(states["torch"]))
+
+
+def save_checkpoint(path: pathlib.Path, algo: Any, run_key: dict[str, Any], step: int, wall_s: float) -> None:
+    """Model and optimiser states (d3rlpy's ``save_model``), gradient step and random states, written atomically."""
+    buffer = io.BytesIO()
+    algo.impl.save_model(buffer)
+    state = {
+        "run": run_key,
+        "step": step,
+        "grad_step": int(algo.grad_step),
+        "wall_s": wall_s,
+        "model": buffer.getvalue(),
+        "random": random_states(),
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    with tmp.open("wb") as f:
+        pickle.dump(state, f)
+    tmp.replace(path)
+
+
+def load_checkpoint(path: pathlib.Path, run_key: dict[str, Any]) -> dict[str, Any] | None:
+    """The checkpoint of this very run (same algorithm, seed, budget and dataset), else None."""
+    if not path.is_file():
+        return None
+    try:
+        with path.open("rb") as f:
+            state = pickle.load(f)  # our own file, written by save_checkpoint
+    except (OSError, pickle.UnpicklingError, EOFError) as error:
+        print(f"[peers] unreadable checkpoint {path} ({error}): starting again", flush=True)
+        return None
+    if state.get("run") != run_key:
+        print(f"[peers] checkpoint {path} is of another run ({state.get('run')}): starting again", flush=True)
+        return None
+    return state
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Train one (dataset, algorithm, seed) cell, appending an evaluation row to ``--csv`` every ``--eval-freq`` steps."""
     import d3rlpy
@@ -327,40 +425,54 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     d3rlpy.seed(args.seed)
     algo = make_algo(args.algo, args.steps)
     env = make_env(meta)
-    low, high = meta["action_low"].astype(np.float64), meta["action_high"].astype(np.float64)
     csv_path = pathlib.Path(args.csv)
+    ckpt = pathlib.Path(args.ckpt) if args.ckpt else None
+    run_key = {k: getattr(args, k) for k in ("algo", "seed", "steps", "eval_freq", "eval_episodes")}
+    run_key["dataset"] = dataset_id
+    state = load_checkpoint(ckpt, run_key) if ckpt is not None else None
+    done, previous_wall = 0, 0.0
+    if state is not None:
+        from d3rlpy.algos.utility import build_scalers_with_transition_picker
+
+        build_scalers_with_transition_picker(algo, dataset)
+        algo.build_with_dataset(dataset)
+        algo.impl.load_model(io.BytesIO(state["model"]))
+        algo.set_grad_step(state["grad_step"])
+        done, previous_wall = int(state["step"]), float(state["wall_s"])
+        print(f"[peers] {dataset_id} {variant} seed {args.seed}: resuming from step {done}", flush=True)
+    dropped = drop_rows(csv_path, dataset_id, variant, args.seed, after_step=done)
+    if dropped:
+        print(f"[peers] {dataset_id} {variant} seed {args.seed}: dropped {dropped} rows of an interrupted run", flush=True)
+    if state is not None:  # after everything that draws random numbers while building
+        set_random_states(state["random"])
     start = time.perf_counter()
 
-    def callback(algo: Any, epoch: int, step: int) -> None:
+    def callback(algo: Any, epoch: int, total_step: int) -> None:
+        step = done + total_step
         if step % args.eval_freq != 0 and step != args.steps:
             return
-        returns = evaluate(algo, env, args.eval_episodes, 10_000 * (args.seed + 1), low, high)
-        scores = normalized_scores(returns, meta.get("ref_min_score"), meta.get("ref_max_score"))
-        row = {
-            "dataset": dataset_id,
-            "variant": variant,
-            "seed": args.seed,
-            "step": step,
-            "score": round(float(np.mean(scores)), 3),
-            "score_std": round(float(np.std(scores)), 3),
-            "mean_return": round(float(np.mean(returns)), 2),
-            "eval_episodes": args.eval_episodes,
-            "wall_s": round(time.perf_counter() - start, 1),
-        }
+        row = eval_row(algo, env, meta, dataset_id, variant, args.seed, step, args.eval_episodes)
+        row["wall_s"] = round(previous_wall + time.perf_counter() - start, 1)
         append_row(csv_path, row)
+        if ckpt is not None and step < args.steps:
+            save_checkpoint(ckpt, algo, run_key, step, row["wall_s"])
         print(f"[peers] {dataset_id} {variant} seed {args.seed} step {step}: score {row['score']:.1f} ", end="")
         print(f"(return {row['mean_return']:.0f}), {row['wall_s']:.0f}s", flush=True)
 
-    algo.fit(
-        dataset,
-        n_steps=args.steps,
-        n_steps_per_epoch=args.steps,
-        show_progress=False,
-        save_interval=args.steps + 1,
-        logger_adapter=d3rlpy.logging.NoopAdapterFactory(),
-        callback=callback,
-    )
+    remaining = args.steps - done
+    if remaining > 0:
+        algo.fit(
+            dataset,
+            n_steps=remaining,
+            n_steps_per_epoch=remaining,
+            show_progress=False,
+            save_interval=remaining + 1,
+            logger_adapter=d3rlpy.logging.NoopAdapterFactory(),
+            callback=callback,
+        )
     env.close()
+    if ckpt is not None:
+        ckpt.unlink(missing_ok=True)
     return {
         "dataset": dataset_id,
         "variant": variant,
@@ -369,7 +481,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "steps": args.steps,
         "eval_freq": args.eval_freq,
         "eval_episodes": args.eval_episodes,
-        "wall_s": round(time.perf_counter() - start, 1),
+        "wall_s": round(previous_wall + time.perf_counter() - start, 1),
+        "resumed_from": done,
         "transitions": n_checked,
         "hyperparameters": hyperparameters(args.algo, args.steps),
         "versions": versions(),
@@ -387,6 +500,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--csv", help="CSV the evaluation rows are appended to")
     parser.add_argument("--dataset", help="dataset id written in the rows (default: the export's)")
     parser.add_argument("--result", help="JSON file written at the end (hyperparameters, versions, wall time)")
+    parser.add_argument("--ckpt", help="checkpoint file, saved at every evaluation and resumed from (removed at the end)")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     parser.add_argument("--versions", action="store_true", help="print the library versions as JSON and exit")
     args = parser.parse_args(argv)
