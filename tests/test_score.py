@@ -149,3 +149,25 @@ def test_presets_and_overrides() -> None:
     assert cpu.signature() != score.build_config(score.parse_args(["--steps", "51"]), "cpu").signature()
     with pytest.raises(SystemExit):
         score.parse_args(["--variants", "T7"])
+
+
+def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    """Every cell writes its training statistics and keeps its final model; --reevaluate scores it under other rules."""
+    out = tmp_path / "out"
+    assert run(pendulum_root, out, "--variants", "T1", "--seeds", "0", "--log-interval", "2") == 0
+    name = "test_pendulum-v0__T1__seed0"
+    stats = score.read_train_stats(out / "train" / name)
+    train_rows = [r for r in stats if "train/q_mean" in r]
+    assert [r["time/total_timesteps"] for r in train_rows] == [2, 4, 6]
+    for key in ("train/bc_loss", "train/q_loss", "train/lookahead_q_1", "train/lookahead_alive", "train/actor_grad_norm"):
+        assert all(key in r for r in train_rows), key
+    assert all(0 <= r["train/action_saturation"] <= 1 for r in train_rows)
+    assert (out / "models" / f"{name}.zip").exists()
+    final = score.read_rows(out / "scores.csv")[-1]
+    assert score.main(["--out", str(out), "--reevaluate", "ema", "online", "candidates3", "-v", "0"]) == 0
+    rows = {r["rule"]: r for r in score.reevaluate(out, ["ema"], 1, "cpu", verbose=0)}  # already done: skipped, read back
+    assert set(rows) == {"ema", "online", "candidates3"}
+    assert float(rows["ema"]["score"]) == pytest.approx(final["score"])  # same rule, same resets: the run's final score
+    assert "| test/pendulum-v0 | T1 | candidates3 |" in (out / "reeval.md").read_text()
+    with pytest.raises(ValueError, match="unknown evaluation rule"):
+        score.main(["--out", str(out), "--reevaluate", "best-of-3"])

@@ -90,21 +90,33 @@ def reference_step(model, policy, batch) -> dict[str, object]:
     # L_q (eq. 3, 4): gamma^i-weighted top-K pessimistic Q along the model rollout, masked after termination
     state, action = obs, ref_sample(actor, features)
     alive = th.ones(obs.shape[0])
-    terms = []
+    terms, penalties = [], []
+    dyn = policy.dynamics
     for i in range(model.rollout_length + 1):
         q_i = ref_q(critic, state, action, detach=True)
         q_k = q_i.sort(dim=0).values[: model.top_k].mean(dim=0)
         terms.append((q_k, alive))
         if i == model.rollout_length:
             break
-        next_state, _, term_prob, _ = policy.dynamics.step(state, action)
+        next_state, _, term_prob, _ = dyn.step(state, action)
+        # the elites' disagreement, member by member: std over elites of the mean state change (standardised)
+        x = th.cat(((state - dyn.obs_mean) / dyn.obs_std, (action - dyn.act_mean) / dyn.act_std), dim=-1)
+        means = th.stack([dyn._forward(x[None], dyn.elites[j : j + 1])[0][0] for j in range(dyn.n_elites)])
+        doubt = means[..., : dyn.obs_dim].std(dim=0).pow(2).mean(dim=-1).sqrt()
         term = model._termination_fn(state, action, next_state).float() if model._termination_fn else term_prob.detach()
+        if model.lookahead_uncertainty_cutoff is not None:
+            term = th.maximum(term, (doubt.detach() > model.lookahead_uncertainty_cutoff).float())
+        penalties.append((alive * doubt).mean())
         alive = alive * (1.0 - term)
         state = next_state
         action = ref_sample(actor, feats(state))
-    scale = terms[0][0].abs().mean().detach().clamp_min(1e-6)
-    q_loss = -sum(model.gamma**i * (a * q_k).mean() for i, (q_k, a) in enumerate(terms)) / scale
-    actor_loss = bc_loss + model.eta * q_loss
+    scale = terms[0][0].abs().mean().detach().clamp_min(max(model.q_scale_floor_value or 0.0, 1e-6))
+    weights = [model.gamma**i for i in range(model.rollout_length + 1)]
+    if model.lookahead_normalization == "weights":
+        weights = [w / sum(weights) for w in weights]
+    q_loss = -sum(w * (a * q_k).mean() for w, (q_k, a) in zip(weights, terms, strict=True)) / scale
+    q_loss = q_loss + model.lookahead_uncertainty_penalty * sum(w * u for w, u in zip(weights[1:], penalties, strict=True))
+    actor_loss = bc_loss + model.eta_schedule(model._current_progress_remaining) * q_loss
     actor.optimizer.zero_grad()
     actor_loss.backward()
     actor_grads = [p.grad.clone() for p in actor.parameters()]
@@ -128,12 +140,27 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
     th.testing.assert_close(a.detach(), b.detach(), rtol=RTOL, atol=ATOL)
 
 
-@pytest.mark.parametrize("kwargs", [{"hopper": True}, {}, {"rollout_length": 0}, {"backprop_through_model": True, "eta": 2.5}])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"hopper": True},
+        {},
+        {"rollout_length": 0},
+        {"backprop_through_model": True, "eta": 2.5},
+        # the options for the learning-quality suspects (#12), each against the plain reference
+        {"lookahead_normalization": "weights"},
+        {"q_scale_floor": 50.0},
+        {"eta": lambda progress: 0.25 + progress},
+        {"lookahead_uncertainty_penalty": 0.7, "lookahead_normalization": "weights"},
+        {"lookahead_uncertainty_cutoff": 0.215, "lookahead_uncertainty_penalty": 0.3},
+    ],
+)
 def test_update_matches_reference(kwargs):
     model = _model(**kwargs)
     policy = model.policy
     ref_policy = copy.deepcopy(policy)  # its optimizers follow the copied parameters
     model._n_updates = 10  # past ema_start, an EMA step (ema_update_freq=1)
+    model._current_progress_remaining = 0.6
     buffer = model._setup_offline_data()
     th.manual_seed(0)
     batch = buffer.sample(32)

@@ -511,6 +511,19 @@ def reevaluate(out: pathlib.Path, rules: list[str], episodes: int, device: str, 
 
 # ----------------------------------------------------------------------------------------- reports
 
+# d3rlpy baselines of ``sb3-pola peers`` (``peers.csv`` next to ``scores.csv``): table rows after POLA's, curves
+PEER_VARIANTS = ["d3rlpy-TD3+BC", "d3rlpy-IQL", "d3rlpy-BC"]
+PEER_STYLES: dict[str, tuple[str, str]] = {
+    "d3rlpy-TD3+BC": ("tab:brown", "--"),
+    "d3rlpy-IQL": ("tab:pink", "-."),
+    "d3rlpy-BC": ("goldenrod", ":"),
+}
+
+
+def is_peer(variant: str) -> bool:
+    """Whether a variant is a d3rlpy baseline (``d3rlpy-*``, from ``peers.csv``)."""
+    return variant.startswith("d3rlpy-")
+
 
 def _fmt(values: list[float]) -> str:
     values = [v for v in values if not math.isnan(v)]
@@ -554,8 +567,17 @@ def dataset_score(dataset: str) -> float | None:
         return None
 
 
-def markdown_table(rows: list[dict[str, Any]], variants: list[str], config: dict[str, Any] | None = None) -> str:
-    """Table-I-style markdown: one line per (dataset, variant), final and best score mean ± std over seeds."""
+def markdown_table(
+    rows: list[dict[str, Any]],
+    variants: list[str],
+    config: dict[str, Any] | None = None,
+    peers_config: dict[str, Any] | None = None,
+) -> str:
+    """Table-I-style markdown: one line per (dataset, variant), final and best score mean ± std over seeds.
+
+    Rows of d3rlpy baselines (variants ``d3rlpy-*``, from ``peers.csv``) come after each dataset's POLA rows;
+    ``peers_config`` (``peers_config.json``) describes their budget and d3rlpy version.
+    """
     summary = summarize(rows)
     lines = []
     if config:
@@ -563,6 +585,21 @@ def markdown_table(rows: list[dict[str, Any]], variants: list[str], config: dict
             f"Budget: {config.get('steps')} gradient steps per run, evaluation every {config.get('eval_freq')} steps "
             f"on {config.get('eval_episodes')} episodes (preset `{config.get('preset')}`, device {config.get('device')})."
         )
+        lines.append("")
+    if any(is_peer(v) for (_, v) in summary):
+        text = "Rows `d3rlpy-*`: d3rlpy baselines (`sb3-pola peers`, `peers.csv`) trained on the same arrays"
+        if peers_config:
+            version = peers_config.get("versions", {}).get("d3rlpy", "?")
+            text += (
+                f", d3rlpy {version}, {peers_config.get('steps')} gradient steps per run, evaluation every "
+                f"{peers_config.get('eval_freq')} steps on {peers_config.get('eval_episodes')} episodes"
+            )
+        text += (
+            " with the same evaluation protocol (deterministic actions, the same reset seeds, D4RL-normalised); "
+            "d3rlpy's hyperparameters: TD3+BC alpha 2.5 on standardised states, IQL with return-based reward "
+            "scaling (x1000) and a cosine actor learning rate, BC (deterministic, MSE)."
+        )
+        lines.append(text)
         lines.append("")
     lines.append("| dataset | variant | final | best | seeds | steps | wall s / run | dataset mean | paper POLA (D4RL v2) |")
     lines.append("|---|---|---|---|---|---|---|---|---|")
@@ -573,8 +610,10 @@ def markdown_table(rows: list[dict[str, Any]], variants: list[str], config: dict
         data_score = dataset_score(dataset)
         data_text = "-" if data_score is None else f"{data_score:.1f}"
         ordered = [v for v in variants if (dataset, v) in summary] + sorted(
-            v for (d, v) in summary if d == dataset and v not in variants
+            v for (d, v) in summary if d == dataset and v not in variants and not is_peer(v)
         )
+        peers = [v for (d, v) in summary if d == dataset and is_peer(v)]
+        ordered += [v for v in PEER_VARIANTS if v in peers] + sorted(v for v in peers if v not in PEER_VARIANTS)
         for variant in ordered:
             entry = summary[(dataset, variant)]
             steps = "/".join(str(s) for s in sorted(set(entry["steps"])))
@@ -593,7 +632,11 @@ def markdown_table(rows: list[dict[str, Any]], variants: list[str], config: dict
 
 
 def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.Path]:
-    """Learning curves like the paper's Fig. 3 (rollout length) and Fig. 4 (products), a PNG per dataset and figure."""
+    """Learning curves like the paper's Fig. 3 (rollout length) and Fig. 4 (products), a PNG per dataset and figure.
+
+    d3rlpy baselines (``d3rlpy-*`` rows): TD3+BC is drawn dashed in both figures, and ``fig_peers_<dataset>.png``
+    shows every baseline next to POLA's T0, T3 and BC (those present).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -615,10 +658,17 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
     }
     for dataset in dict.fromkeys(r["dataset"] for r in rows):
         data_score = dataset_score(dataset)
-        for figure, members in FIGURES.items():
+        figures = {**FIGURES, "peers": ["T0", "T3", "BC", *PEER_VARIANTS]}
+        for figure, members in figures.items():
             present = [v for v in members if (dataset, v) in curves]
-            if len([v for v in present if v != "BC"]) < 2:
+            if figure == "peers":
+                if not any(is_peer(v) for v in present):
+                    continue
+                present += sorted(v for (d, v) in curves if d == dataset and is_peer(v) and v not in present)
+            elif len([v for v in present if v != "BC"]) < 2:
                 continue  # a comparison needs two variants
+            else:
+                present += [v for v in PEER_VARIANTS[:1] if (dataset, v) in curves]  # TD3+BC, dashed
             fig, ax = plt.subplots(figsize=(5.5, 3.6), dpi=90)
             for variant in present:
                 by_step = curves[(dataset, variant)]
@@ -627,20 +677,16 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
                 std = np.array([np.std(list(by_step[s].values())) for s in steps])
                 n_seeds = max(len(by_step[s]) for s in steps)
                 style = "--" if variant == "BC" else "-"
-                ax.plot(
-                    steps,
-                    mean,
-                    style,
-                    marker="o",
-                    ms=3,
-                    color=colors.get(variant),
-                    label=f"{VARIANTS[variant][0]} (n={n_seeds})",
-                )
+                color = colors.get(variant)
+                if is_peer(variant):
+                    color, style = PEER_STYLES.get(variant, ("black", "--"))
+                label = VARIANTS[variant][0] if variant in VARIANTS else variant
+                ax.plot(steps, mean, style, marker="o", ms=3, color=color, label=f"{label} (n={n_seeds})")
                 if n_seeds > 1:
-                    ax.fill_between(steps, mean - std, mean + std, color=colors.get(variant), alpha=0.15)
+                    ax.fill_between(steps, mean - std, mean + std, color=color, alpha=0.15)
             if data_score is not None:
                 ax.axhline(data_score, color="black", ls=":", lw=1, label="dataset mean")
-            title = "rollout length T" if figure == "rollout" else "state products"
+            title = {"rollout": "rollout length T", "products": "state products"}.get(figure, "d3rlpy baselines")
             ax.set_title(f"{dataset}: {title}", fontsize=10)
             ax.set_xlabel("gradient steps")
             ax.set_ylabel("normalised score")
@@ -655,12 +701,16 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
 
 
 def write_reports(out: pathlib.Path, variants: list[str], config: dict[str, Any] | None = None) -> None:
-    """``table.md`` and the figures from ``scores.csv``."""
+    """``table.md`` and the figures from ``scores.csv``, with the d3rlpy baselines of ``peers.csv`` when it exists."""
     rows = read_rows(out / "scores.csv")
-    if not rows:
+    peer_rows = [r for r in read_rows(out / "peers.csv") if is_peer(r["variant"])]
+    if not rows and not peer_rows:
         print(f"[score] no evaluations in {out / 'scores.csv'} yet")
         return
-    (out / "table.md").write_text(markdown_table(rows, variants, config))
+    peers_path = out / "peers_config.json"
+    peers_config = json.loads(peers_path.read_text()) if peer_rows and peers_path.exists() else None
+    rows = rows + peer_rows
+    (out / "table.md").write_text(markdown_table(rows, variants, config, peers_config))
     paths = plot_curves(rows, out)
     print(f"[score] wrote {out / 'table.md'}" + "".join(f", {p.name}" for p in paths))
 

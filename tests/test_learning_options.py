@@ -1,0 +1,207 @@
+"""The options for POLA's learning quality on locomotion data (issue #12): each behaves as documented.
+
+The update with every option is also checked against the plain reference in ``test_speed.py``.
+"""
+
+from __future__ import annotations
+
+import pytest
+import torch as th
+from pola_data import light_kwargs, record_random_dataset
+
+from sb3_pola import POLA
+from sb3_pola.common.dynamics import EnsembleDynamics
+from sb3_pola.common.schedules import WarmupSchedule, warmup_schedule
+from sb3_pola.pola.pola import lookahead_q_objective
+
+
+@pytest.fixture(scope="module")
+def pendulum_path(tmp_path_factory) -> str:
+    return str(record_random_dataset(tmp_path_factory.mktemp("data"), "pendulum/random-v0", "Pendulum-v1", 600))
+
+
+# ---------------------------------------------------------------- eta schedule
+def test_warmup_schedule_values():
+    schedule = warmup_schedule(2.0, warmup=0.2, ramp=0.4)
+    # progress_remaining 1 -> 0 over learn; done = 1 - progress_remaining
+    assert [schedule(1.0 - done) for done in (0.0, 0.1, 0.2, 0.4, 0.6, 0.9, 1.0)] == pytest.approx(
+        [0.0, 0.0, 0.0, 1.0, 2.0, 2.0, 2.0]
+    )
+    assert WarmupSchedule(1.0, warmup=0.5, ramp=0.0)(0.49) == 1.0  # a step
+    with pytest.raises(ValueError, match="fractions"):
+        WarmupSchedule(1.0, warmup=1.5)
+
+
+def test_eta_schedule_is_followed_during_learn(pendulum_path, tmp_path):
+    from stable_baselines3.common.logger import configure
+
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=1, eta=warmup_schedule(1.0, 0.5, 0.0)))
+    etas = []
+    real_update = model._update
+
+    def spy(batch):
+        stats = real_update(batch)
+        etas.append(float(stats["eta"]))
+        return stats
+
+    model._update = spy  # type: ignore[method-assign]
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(8, log_interval=4)
+    assert etas == [0.0] * 4 + [1.0] * 4  # progress_remaining is taken before each step
+    assert "train/eta" in (tmp_path / "progress.csv").read_text().splitlines()[0]
+    # a schedule survives save/load
+    model.save(tmp_path / "m")
+    loaded = POLA.load(tmp_path / "m")
+    assert isinstance(loaded.eta, WarmupSchedule) and loaded.eta_schedule(0.25) == 1.0
+
+
+# ---------------------------------------------------------------- normalisation of the look-ahead sum and of |Q|
+def test_weights_normalisation_makes_eta_independent_of_t():
+    q = th.full((2, 4, 3), 2.0)  # N=2, T+1=4, B=3: the same Q everywhere
+    gammas = th.tensor([1.0, 0.9, 0.81, 0.729])
+    first, _ = lookahead_q_objective(q, th.ones(4, 3), gammas, top_k=1)
+    weights, _ = lookahead_q_objective(q, th.ones(4, 3), gammas, top_k=1, normalization="weights")
+    assert first.item() == pytest.approx(-float(gammas.sum()))  # eq. 3/4 as written: sum_i gamma^i
+    assert weights.item() == pytest.approx(-1.0)  # as at T = 0
+
+
+def test_q_scale_floor_bounds_the_divisor():
+    q = th.full((1, 1, 4), 2.0)
+    plain, _ = lookahead_q_objective(q, th.ones(1, 4), th.ones(1), top_k=1)
+    floored, _ = lookahead_q_objective(q, th.ones(1, 4), th.ones(1), top_k=1, q_scale_floor=50.0)
+    assert plain.item() == pytest.approx(-1.0) and floored.item() == pytest.approx(-2.0 / 50.0)
+    big = th.full((1, 1, 4), 200.0)  # above the floor the batch mean |Q| divides, as in Diffusion-QL
+    assert lookahead_q_objective(big, th.ones(1, 4), th.ones(1), top_k=1, q_scale_floor=50.0)[0].item() == pytest.approx(-1.0)
+
+
+def test_auto_q_scale_floor_is_the_datasets_value_scale(pendulum_path, tmp_path):
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=0, q_scale_floor="auto"))
+    assert model.q_scale_floor_value is None
+    model.learn(1)
+    rewards = model.replay_buffer.rewards
+    assert model.q_scale_floor_value == pytest.approx(float(rewards.abs().mean()) / (1 - model.gamma), rel=1e-5)
+    model.save(tmp_path / "m")
+    assert POLA.load(tmp_path / "m").q_scale_floor_value == pytest.approx(model.q_scale_floor_value)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"lookahead_normalization": "sum"}, "lookahead_normalization"),
+        ({"q_scale_floor": "dataset"}, "q_scale_floor"),
+        ({"lookahead_uncertainty_penalty": -1.0}, "penalty"),
+    ],
+)
+def test_bad_option_values_raise(pendulum_path, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(**kwargs))
+
+
+# ---------------------------------------------------------------- the model's uncertainty in the look-ahead
+def test_disagreement_is_the_elites_spread():
+    model = EnsembleDynamics(3, 2, n_members=3, n_elites=2, hidden_dim=8, n_layers=1)
+    obs, act = th.randn(5, 3), th.randn(5, 2)
+    with th.no_grad():
+        u = model.step(obs, act)[3]
+        mean, _, _ = model(obs, act)
+        expected = mean[model.elites][..., :3].std(dim=0).pow(2).mean(dim=-1).sqrt()
+        th.testing.assert_close(u, expected)
+        assert (u > 0).all()
+        for layer in model.linear_layers:  # identical elites: no disagreement
+            layer.weight[1].copy_(layer.weight[0])
+            layer.bias[1].copy_(layer.bias[0])
+        model.elites.copy_(th.tensor([0, 1]))
+        assert model.step(obs, act)[3].abs().max() < 1e-6
+
+
+def test_uncertainty_cutoff_and_penalty(pendulum_path):
+    dynamics = dict(n_members=3, n_elites=2, hidden_dim=16, n_layers=1)
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=2, dynamics_kwargs=dynamics))
+    model.learn(1)
+    obs = model.replay_buffer.sample(16).observations
+    feats = model.policy.actor_features(obs)
+    th.manual_seed(0)
+    plain_loss, plain = model._lookahead_q_loss(obs, feats)
+    assert plain["lookahead_uncertainty_1"] > 0 and plain["lookahead_alive"] > 0
+    assert 0 <= plain["action_saturation"] <= 1
+    model.lookahead_uncertainty_cutoff = 0.0  # every predicted state is too uncertain: only the current-state term
+    th.manual_seed(0)
+    _, cut = model._lookahead_q_loss(obs, feats)
+    assert cut["lookahead_alive"] == 0 and cut["lookahead_q_1"] == 0 and cut["lookahead_q_2"] == 0
+    assert cut["lookahead_q_0"] == pytest.approx(float(plain["lookahead_q_0"]))
+    model.lookahead_uncertainty_cutoff = None
+    model.lookahead_uncertainty_penalty = 2.0
+    th.manual_seed(0)
+    penalised_loss, _ = model._lookahead_q_loss(obs, feats)
+    g = model.gamma
+    expected = plain_loss + 2.0 * (g * plain["lookahead_uncertainty_1"] + g**2 * plain["lookahead_uncertainty_2"])
+    assert penalised_loss.item() == pytest.approx(expected.item(), rel=1e-5)
+
+
+# ---------------------------------------------------------------- the dynamics model's mean fit
+def _loss_terms(mean_loss: str, beta: float = 0.5):
+    th.manual_seed(0)
+    model = EnsembleDynamics(3, 2, n_members=2, n_elites=1, hidden_dim=8, n_layers=1, mean_loss=mean_loss, beta=beta)
+    for layer in model.linear_layers:  # no weight decay, to compare the likelihood terms alone
+        layer.weight.data.zero_()
+    mean = th.randn(2, 6, 4, requires_grad=True)
+    logvar = th.randn(2, 6, 4).clamp(-2, 2).requires_grad_(True)
+    y = th.randn(2, 6, 4)
+    loss = model._loss(mean, logvar, None, y, None)
+    loss.backward()
+    return loss, mean, logvar, y
+
+
+def test_dynamics_mean_losses():
+    nll, mean, logvar, y = _loss_terms("nll")
+    beta0, *_ = _loss_terms("beta_nll", beta=0.0)
+    th.testing.assert_close(beta0, nll)  # beta = 0 is the NLL
+    # beta = 1: the mean's gradient is the MSE's, whatever the variance
+    _, mean1, logvar1, y1 = _loss_terms("beta_nll", beta=1.0)
+    th.testing.assert_close(mean1.grad, 2 * (mean1 - y1).detach() / (6 * 4))
+    # mse: the mean by squared error, the variance by the NLL of the detached mean
+    _, mean_m, logvar_m, y_m = _loss_terms("mse")
+    th.testing.assert_close(mean_m.grad, 2 * (mean_m - y_m).detach() / (6 * 4))
+    th.testing.assert_close(logvar_m.grad, logvar.grad)
+    with pytest.raises(ValueError, match="mean_loss"):
+        EnsembleDynamics(3, 2, mean_loss="huber")
+
+
+@pytest.mark.parametrize("mean_loss", ["beta_nll", "mse"])
+def test_dynamics_fit_with_each_mean_loss_beats_no_change(mean_loss):
+    th.manual_seed(0)
+    obs, act = th.randn(1500, 3), th.randn(1500, 2)
+    next_obs = obs + 0.3 * th.tanh(act @ th.randn(2, 3)) + 0.01 * th.randn(1500, 3)
+    model = EnsembleDynamics(3, 2, n_members=3, n_elites=2, hidden_dim=32, n_layers=2, mean_loss=mean_loss)
+    info = model.fit(obs, act, next_obs, th.zeros(1500), max_epochs=30)
+    assert info["holdout_mse"] < 0.1 * info["no_change_mse"]
+
+
+# ---------------------------------------------------------------- the actor predict evaluates
+def test_predict_actor_online_uses_the_trained_actor(pendulum_path, tmp_path):
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=0))
+    model.learn(2)
+    obs = model.replay_buffer.sample(4).observations
+    feats = model.policy.actor_features(obs)
+
+    def draw(fn):  # the same noise for every chain: seeded stochastic sampling
+        th.manual_seed(7)
+        with th.no_grad():
+            return fn()
+
+    with th.no_grad():
+        for p in model.policy.actor.parameters():  # the online actor moves away from its EMA copy
+            p.add_(0.05 * th.randn_like(p))
+    ema = draw(lambda: model.policy.actor_ema.sample(feats))
+    online = draw(lambda: model.policy.actor.sample(feats))
+    assert not th.allclose(ema, online)
+    th.testing.assert_close(draw(lambda: model.policy._predict(obs)), ema)
+    model.policy.predict_actor = "online"
+    th.testing.assert_close(draw(lambda: model.policy._predict(obs)), online)
+    online_model = POLA(
+        "MlpPolicy", dataset=pendulum_path, **light_kwargs(policy_kwargs={"net_arch": [8], "predict_actor": "online"})
+    )
+    online_model.save(tmp_path / "m")
+    assert POLA.load(tmp_path / "m").policy.predict_actor == "online"
+    with pytest.raises(ValueError, match="predict_actor"):
+        POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(policy_kwargs={"net_arch": [8], "predict_actor": "x"}))
