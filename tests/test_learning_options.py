@@ -153,11 +153,11 @@ def _loss_terms(mean_loss: str, beta: float = 0.5):
 
 
 def test_dynamics_mean_losses():
-    nll, mean, logvar, y = _loss_terms("nll")
+    nll, _, logvar, _ = _loss_terms("nll")
     beta0, *_ = _loss_terms("beta_nll", beta=0.0)
     th.testing.assert_close(beta0, nll)  # beta = 0 is the NLL
     # beta = 1: the mean's gradient is the MSE's, whatever the variance
-    _, mean1, logvar1, y1 = _loss_terms("beta_nll", beta=1.0)
+    _, mean1, _, y1 = _loss_terms("beta_nll", beta=1.0)
     th.testing.assert_close(mean1.grad, 2 * (mean1 - y1).detach() / (6 * 4))
     # mse: the mean by squared error, the variance by the NLL of the detached mean
     _, mean_m, logvar_m, y_m = _loss_terms("mse")
