@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from sb3_pola.experiments import score
-from sb3_pola.experiments.peers_worker import TRANSITION_FIELDS, VARIANT_NAMES
+from sb3_pola.experiments.peers_worker import VARIANT_NAMES
 
 ALGOS = list(VARIANT_NAMES)
 PEER_REQUIREMENTS = ["d3rlpy==2.8.1", "gymnasium[mujoco]==1.0.*", "torch==2.13.0"]
@@ -93,9 +93,7 @@ def export_arrays(data: Any, lengths: np.ndarray) -> dict[str, np.ndarray]:
     timeouts = np.zeros(n, dtype=np.float32)
     timeouts[ends] = 1.0 - terminals[ends]
     spec = json.loads(data.metadata["env_spec"]) if data.metadata.get("env_spec") else {}
-    env_id = spec.get("id") or data.env_id
-    if not env_id:
-        raise ValueError(f"dataset {data.dataset_id!r} records no environment")
+    env_id = spec.get("id") or data.env_id or ""
     return {
         "observations": np.ascontiguousarray(data.observations, dtype=np.float32),
         "actions": np.ascontiguousarray(data.actions, dtype=np.float32),
@@ -122,16 +120,13 @@ def export_dataset(dataset_id: str, path: pathlib.Path) -> pathlib.Path:
 
     data = load_offline_dataset(dataset_id)
     arrays = export_arrays(data, episode_lengths(dataset_id))
+    if not str(arrays["env_id"]):
+        raise ValueError(f"dataset {dataset_id!r} records no environment (env_spec): the baselines cannot be evaluated")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp.npz")
     np.savez(tmp, **arrays)  # type: ignore[arg-type]
     tmp.replace(path)
     return path
-
-
-def dataset_transitions(arrays: dict[str, Any]) -> dict[str, np.ndarray]:
-    """The transition arrays of an export (the worker's inputs)."""
-    return {name: arrays[name] for name in TRANSITION_FIELDS}
 
 
 # ----------------------------------------------------------------------------------------- the peers venv
