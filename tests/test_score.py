@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pola_data import record_random_dataset
 
-from sb3_pola.experiments import score
+from sb3_pola.experiments import diagnostics, score
 
 TINY = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
 TINY += [
@@ -20,7 +20,7 @@ TINY += [
     "--dynamics-kwargs",
     '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}',
 ]
-TINY += ["--preset", "cpu", "--device", "cpu", "-v", "0"]
+TINY += ["--preset", "cpu", "--no-compile", "--device", "cpu", "-v", "0"]
 
 
 @pytest.fixture(scope="module")
@@ -156,8 +156,7 @@ def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.
     out = tmp_path / "out"
     assert run(pendulum_root, out, "--variants", "T1", "--seeds", "0", "--log-interval", "2") == 0
     name = "test_pendulum-v0__T1__seed0"
-    stats = score.read_train_stats(out / "train" / name)
-    train_rows = [r for r in stats if "train/q_mean" in r]
+    train_rows = diagnostics.read_train_stats(out / "train" / name)
     assert [r["time/total_timesteps"] for r in train_rows] == [2, 4, 6]
     for key in ("train/bc_loss", "train/q_loss", "train/lookahead_q_1", "train/lookahead_alive", "train/actor_grad_norm"):
         assert all(key in r for r in train_rows), key
@@ -171,3 +170,10 @@ def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.
     assert "| test/pendulum-v0 | T1 | candidates3 |" in (out / "reeval.md").read_text()
     with pytest.raises(ValueError, match="unknown evaluation rule"):
         score.main(["--out", str(out), "--reevaluate", "best-of-3"])
+    # diagnostics.md: the end-of-training statistics of the cell, with the look-ahead growth q_1 / q_0
+    table = (out / "diagnostics.md").read_text()
+    row = next(line for line in table.splitlines() if line.startswith(f"| {name} |"))
+    summary = diagnostics.summarize_cell(train_rows)
+    assert summary["lookahead_growth"] == pytest.approx(summary["lookahead_q_1"] / summary["lookahead_q_0"])
+    assert row.split(" | ")[1] == "6"
+    assert diagnostics.plot_lookahead(out) == out / "fig_lookahead.png"
