@@ -15,6 +15,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("sb3_pola.benchmarks.bench", "speed and memory benchmarks"),
     "score": ("sb3_pola.experiments.score", "score benchmark: POLA and its ablations over datasets and seeds"),
     "peers": ("sb3_pola.experiments.peers", "d3rlpy baselines (TD3+BC, IQL, BC) for the score table"),
+    "model-check": ("sb3_pola.experiments.model_check", "k-step error of the dynamics model under dataset and policy actions"),
     "datasets": ("sb3_pola.common.datasets", "list the Minari datasets found locally"),
 }
 

@@ -1,0 +1,165 @@
+"""``sb3-pola model-check``: how well the dynamics model predicts what the look-ahead asks of it.
+
+The look-ahead of eq. 3 chains the model ``T`` times from dataset states under the *policy's* actions.
+The fit's holdout score measures only one step under the *dataset's* actions. This check fits the model
+once per ``mean_loss`` (same seed, same budget) and measures, on held-out starts:
+
+- ``k``-step open-loop error along the dataset's own trajectories (dataset actions), ``k = 1..T``;
+- with ``--policy MODEL.zip`` on a MuJoCo env whose observation is ``(qpos, qvel)`` or ``(qpos[1:], qvel)``
+  (HalfCheetah, Hopper, Walker2d, InvertedPendulum): ``k``-step error under that policy's actions against
+  the real simulator, started from dataset states (the root's x position, where the observation lacks it,
+  set to 0: these envs do not depend on it);
+- the elites' disagreement along the same rollouts (is it a usable warning of model error?).
+
+Errors are mean squared errors of the raw next state, next to the error of predicting "no change".
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import time
+from typing import Any
+
+import numpy as np
+
+
+def chained_starts(data: Any, horizon: int, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices ``i`` whose next ``horizon`` transitions follow one another in one episode."""
+    obs, next_obs = data.observations, data.next_observations
+    follows = np.all(next_obs[:-1] == obs[1:], axis=1) & (data.dones[:-1] == 0)  # i -> i + 1 is the same episode
+    ok = np.ones(len(obs) - horizon, dtype=bool)
+    for k in range(horizon - 1):
+        ok &= follows[k : len(obs) - horizon + k]
+    candidates = np.flatnonzero(ok)
+    return rng.choice(candidates, size=min(n, len(candidates)), replace=False)
+
+
+def open_loop_errors(dynamics: Any, data: Any, starts: np.ndarray, horizon: int) -> dict[str, list[float]]:
+    """``k``-step MSE of the model along the dataset's trajectories (its own actions), and of "no change"."""
+    import torch as th
+
+    obs = th.as_tensor(data.observations[starts])
+    state = obs
+    mse, no_change, doubt = [], [], []
+    with th.no_grad():
+        for k in range(horizon):
+            act = th.as_tensor(data.actions[starts + k])
+            state, _, _, u = dynamics.step(state, act)
+            target = th.as_tensor(data.next_observations[starts + k])
+            mse.append(float(((state - target) ** 2).mean()))
+            no_change.append(float(((obs - target) ** 2).mean()))
+            doubt.append(float(u.mean()))
+    return {"mse": mse, "no_change_mse": no_change, "disagreement": doubt}
+
+
+def policy_rollout_errors(
+    dynamics: Any, policy_model: Any, env: Any, data: Any, starts: np.ndarray, horizon: int
+) -> dict[str, list[float]]:
+    """``k``-step MSE of the model against the simulator under the policy's own (deterministic) actions."""
+    import torch as th
+
+    sim = env.unwrapped
+    nq, nv = sim.model.nq, sim.model.nv
+    obs_dim = data.observations.shape[1]
+    if obs_dim not in (nq + nv, nq - 1 + nv):
+        raise ValueError(f"{data.env_id}: the observation is not (qpos[1:], qvel) or (qpos, qvel); cannot set the simulator")
+    n_pos = obs_dim - nv  # qpos entries in the observation: nq, or nq - 1 without the root's x position
+    low, high = data.action_space.low, data.action_space.high
+    errors = np.zeros((horizon, len(starts)))
+    no_change = np.zeros((horizon, len(starts)))
+    doubt = np.zeros((horizon, len(starts)))
+    env.reset(seed=0)
+    for j, i in enumerate(starts):
+        s0 = data.observations[i].astype(np.float64)
+        qpos = s0[:n_pos] if n_pos == nq else np.concatenate(([0.0], s0[:n_pos]))
+        sim.set_state(qpos, s0[n_pos:])
+        real, model_state = s0, th.as_tensor(s0, dtype=th.float32)[None]
+        for k in range(horizon):
+            action, _ = policy_model.predict(real, deterministic=True)  # env units
+            scaled = th.as_tensor(2.0 * (action - low) / (high - low) - 1.0, dtype=th.float32)[None]  # [-1, 1]
+            with th.no_grad():
+                model_state, _, _, u = dynamics.step(model_state, scaled)
+            real, _, terminated, _, _ = env.step(action)
+            errors[k, j] = float(((model_state[0].numpy() - real) ** 2).mean())
+            no_change[k, j] = float(((s0 - real) ** 2).mean())
+            doubt[k, j] = float(u[0])
+            if terminated:  # the rest of this rollout does not exist in the simulator
+                errors[k + 1 :, j] = np.nan
+                no_change[k + 1 :, j] = np.nan
+                doubt[k + 1 :, j] = np.nan
+                break
+    return {
+        "mse": np.nanmean(errors, axis=1).tolist(),
+        "no_change_mse": np.nanmean(no_change, axis=1).tolist(),
+        "disagreement": np.nanmean(doubt, axis=1).tolist(),
+        "error_disagreement_corr": float(np.corrcoef(np.nan_to_num(errors[-1]), np.nan_to_num(doubt[-1]))[0, 1]),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``sb3-pola model-check``; returns the exit code."""
+    parser = argparse.ArgumentParser(prog="sb3-pola model-check", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--dataset", required=True)
+    parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
+    parser.add_argument("--mean-loss", nargs="+", default=["nll", "beta_nll", "mse"])
+    parser.add_argument("--dynamics-kwargs", default='{"n_members": 5, "n_elites": 3, "hidden_dim": 128, "n_layers": 3}')
+    parser.add_argument("--max-steps", type=int, default=2000, help="cap on the fit's gradient steps (the cpu preset's)")
+    parser.add_argument("--horizon", type=int, default=3)
+    parser.add_argument("--starts", type=int, default=500, help="held-out start states")
+    parser.add_argument("--policy", help="a saved POLA model whose actions drive the simulator rollouts")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", help="write the results as JSON here")
+    args = parser.parse_args(argv)
+    if args.data_dir:
+        os.environ["MINARI_DATASETS_PATH"] = str(pathlib.Path(args.data_dir).resolve())
+    import torch as th
+
+    from sb3_pola.common.datasets import load_offline_dataset, make_env
+    from sb3_pola.common.dynamics import EnsembleDynamics
+
+    data = load_offline_dataset(args.dataset)
+    rng = np.random.default_rng(args.seed)
+    starts = chained_starts(data, args.horizon, args.starts, rng)
+    # the fit sees every transition; the starts are scored on their k-step chains, which the 1-step fit never targets
+    policy_model = None
+    if args.policy:
+        from sb3_pola.pola import POLA
+
+        policy_model = POLA.load(args.policy, device="cpu")
+    results: dict[str, Any] = {"dataset": args.dataset, "horizon": args.horizon, "starts": len(starts), "fits": {}}
+    for mean_loss in args.mean_loss:
+        th.manual_seed(args.seed)
+        kwargs = {**json.loads(args.dynamics_kwargs), "mean_loss": mean_loss}
+        model = EnsembleDynamics(data.observations.shape[1], data.actions.shape[1], **kwargs)
+        start = time.perf_counter()
+        info = model.fit(data.observations, data.actions, data.next_observations, data.rewards, max_steps=args.max_steps)
+        model.freeze()
+        entry: dict[str, Any] = {"fit": info, "fit_s": time.perf_counter() - start}
+        entry["dataset_actions"] = open_loop_errors(model, data, starts, args.horizon)
+        if policy_model is not None:
+            env = make_env(data)
+            entry["policy_actions"] = policy_rollout_errors(model, policy_model, env, data, starts, args.horizon)
+            env.close()
+        results["fits"][mean_loss] = entry
+        fmt = ", ".join
+        line = (
+            f"[model-check] {mean_loss}: 1-step holdout mse {info['holdout_mse']:.4f} (no change {info['no_change_mse']:.4f})"
+        )
+        line += "; dataset actions k-step mse " + fmt(f"{v:.4f}" for v in entry["dataset_actions"]["mse"])
+        if policy_model is not None:
+            pol = entry["policy_actions"]
+            line += "; policy actions k-step mse " + fmt(f"{v:.4f}" for v in pol["mse"])
+            line += " (no change " + fmt(f"{v:.4f}" for v in pol["no_change_mse"]) + ")"
+            line += f", disagreement {fmt(f'{v:.3f}' for v in pol['disagreement'])}"
+            line += f", corr(error, disagreement) at k=T {pol['error_disagreement_corr']:.2f}"
+        print(line, flush=True)
+    if args.out:
+        pathlib.Path(args.out).write_text(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
