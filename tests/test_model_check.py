@@ -49,7 +49,7 @@ def test_model_check_end_to_end(tmp_path):
 
 def test_model_check_refuses_an_env_it_cannot_set(tmp_path):
     class Sim:
-        class model:  # noqa: N801 - mimics mujoco's attribute names
+        class model:  # mimics mujoco's attribute names
             nq, nv = 5, 5
 
     class Env:
