@@ -177,3 +177,12 @@ def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.
     assert summary["lookahead_growth"] == pytest.approx(summary["lookahead_q_1"] / summary["lookahead_q_0"])
     assert row.split(" | ")[1] == "6"
     assert diagnostics.plot_lookahead(out) == out / "fig_lookahead.png"
+
+
+def test_eta_warmup_from_json() -> None:
+    from sb3_pola.common.schedules import WarmupSchedule
+
+    kwargs = score.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 2.0, "rollout_length": 3})
+    assert isinstance(kwargs["eta"], WarmupSchedule) and kwargs["eta"](0.2) == 2.0 and kwargs["eta"](0.6) == 0.0
+    assert kwargs["rollout_length"] == 3 and "eta_warmup" not in kwargs
+    assert score.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 0.0})["eta"] == 0.0  # BC stays BC

@@ -299,6 +299,19 @@ def append_row(csv_path: pathlib.Path, row: dict[str, Any]) -> None:
         f.flush()
 
 
+def pola_kwargs(extra: dict[str, Any]) -> dict[str, Any]:
+    """POLA keyword arguments from JSON-able ones: ``"eta_warmup": [warmup, ramp]`` becomes a
+    :class:`~sb3_pola.common.schedules.WarmupSchedule` of ``eta`` (behaviour cloning, then a linear ramp)."""
+    kwargs = dict(extra)
+    if "eta_warmup" in kwargs:
+        from sb3_pola.common.schedules import WarmupSchedule
+
+        warmup, ramp = kwargs.pop("eta_warmup")
+        if kwargs.get("eta", 1.0) != 0:  # behaviour cloning stays behaviour cloning
+            kwargs["eta"] = WarmupSchedule(float(kwargs.get("eta", 1.0)), warmup, ramp)
+    return kwargs
+
+
 def _train_logger(folder: pathlib.Path, done_steps: int) -> Any:
     """An SB3 logger writing ``train/*`` statistics to ``folder/progress_from<step>.csv`` (a file per resumed segment)."""
     from stable_baselines3.common.logger import CSVOutputFormat, Logger
@@ -351,7 +364,7 @@ def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib
             policy_kwargs={"net_arch": config.net_arch, "n_action_samples": config.n_action_samples, **policy_kwargs},
             seed=seed,
             device=device,
-            **{**config.extra, **kwargs},
+            **pola_kwargs({**config.extra, **kwargs}),
         )
         done_steps = 0
         dynamics = model.policy.dynamics
