@@ -476,7 +476,10 @@ def reevaluate(out: pathlib.Path, rules: list[str], episodes: int, device: str, 
         with csv_path.open(newline="") as f:
             done = {(r["dataset"] + r["variant"] + r["seed"], r["rule"]) for r in csv.DictReader(f)}
     for path in sorted((out / "models").glob("*.zip")):
-        marker = json.loads((out / "cells" / f"{path.stem}.json").read_text())
+        marker_path = out / "cells" / f"{path.stem}.json"
+        if not marker_path.exists():  # a cell finishing right now: its marker follows its model
+            continue
+        marker = json.loads(marker_path.read_text())
         dataset, variant, seed = marker["dataset"], marker["variant"], int(marker["seed"])
         model = POLA.load(path, device=device)
         env = make_env(dataset)
