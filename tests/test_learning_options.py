@@ -124,6 +124,7 @@ def test_uncertainty_cutoff_and_penalty(pendulum_path):
     plain_loss, plain = model._lookahead_q_loss(obs, feats)
     assert plain["lookahead_uncertainty_1"] > 0 and plain["lookahead_alive"] > 0
     assert 0 <= plain["action_saturation"] <= 1
+    assert plain["policy_q_ensemble_std"] > 0
     model.lookahead_uncertainty_cutoff = 0.0  # every predicted state is too uncertain: only the current-state term
     th.manual_seed(0)
     _, cut = model._lookahead_q_loss(obs, feats)

@@ -18,6 +18,7 @@ KEYS = [
     "q_mean",
     "target_q",
     "q_ensemble_std",
+    "policy_q_ensemble_std",
     "bc_loss",
     "q_loss",
     "eta",

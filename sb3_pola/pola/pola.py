@@ -491,6 +491,9 @@ class POLA(OfflineAlgorithm):
         )
         stats = {f"lookahead_q_{i}": per_step[i].detach() for i in range(horizon + 1)}
         stats["action_saturation"] = saturation
+        # the ensemble's spread at the actor's own actions (next to q_ensemble_std at the data's): pessimism
+        # protects the actor only where the members disagree more off the data than on it
+        stats["policy_q_ensemble_std"] = q.detach().view(-1, horizon + 1, batch_size)[:, 0].std(dim=0).mean()
         stats["lookahead_alive"] = alive_mask[-1].mean()
         if horizon > 0:
             doubt = th.stack(disagreements).mean(dim=1)  # [T]
