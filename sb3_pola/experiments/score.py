@@ -256,6 +256,18 @@ def evaluate(model: Any, env: Any, n_episodes: int, seed: int) -> np.ndarray:
     return returns
 
 
+def evaluation_scores(model: Any, env: Any, n_episodes: int, seed: int) -> dict[str, Any]:
+    """The CSV columns of one evaluation of a cell's model (the resets of seed ``seed``'s protocol)."""
+    returns = evaluate(model, env, n_episodes, seed=10_000 * (seed + 1))
+    scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
+    return {
+        "score": round(float(np.mean(scores)), 3),
+        "score_std": round(float(np.std(scores)), 3),
+        "mean_return": round(float(np.mean(returns)), 2),
+        "eval_episodes": n_episodes,
+    }
+
+
 def _nan_if_none(value: float | None) -> float:
     return math.nan if value is None else float(value)
 
@@ -396,17 +408,12 @@ def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib
                 th.save(dynamics.state_dict(), dyn_path)
             step = model.num_timesteps
             if step % config.eval_freq == 0 or step == config.steps:
-                returns = evaluate(model, env, config.eval_episodes, seed=10_000 * (seed + 1))
-                scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
                 row = {
                     "dataset": dataset,
                     "variant": variant,
                     "seed": seed,
                     "step": step,
-                    "score": round(float(np.mean(scores)), 3),
-                    "score_std": round(float(np.std(scores)), 3),
-                    "mean_return": round(float(np.mean(returns)), 2),
-                    "eval_episodes": config.eval_episodes,
+                    **evaluation_scores(model, env, config.eval_episodes, seed),
                     "wall_s": round(previous_wall + time.perf_counter() - start, 1),
                 }
                 append_row(csv_path, row)
@@ -487,18 +494,13 @@ def reevaluate(out: pathlib.Path, rules: list[str], episodes: int, device: str, 
             if (dataset + variant + str(seed), rule) in done:
                 continue
             apply_eval_rule(model, rule)
-            returns = evaluate(model, env, episodes, seed=10_000 * (seed + 1))
-            scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
             row = {
                 "dataset": dataset,
                 "variant": variant,
                 "seed": seed,
                 "rule": rule,
                 "step": model.num_timesteps,
-                "score": round(float(np.mean(scores)), 3),
-                "score_std": round(float(np.std(scores)), 3),
-                "mean_return": round(float(np.mean(returns)), 2),
-                "eval_episodes": episodes,
+                **evaluation_scores(model, env, episodes, seed),
             }
             new = not csv_path.exists()
             with csv_path.open("a", newline="") as f:
