@@ -206,3 +206,33 @@ def test_predict_actor_online_uses_the_trained_actor(pendulum_path, tmp_path):
     assert POLA.load(tmp_path / "m").policy.predict_actor == "online"
     with pytest.raises(ValueError, match="predict_actor"):
         POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(policy_kwargs={"net_arch": [8], "predict_actor": "x"}))
+
+
+# ---------------------------------------------------------------- the defaults that depart from the paper
+def test_default_q_term_is_normalised_by_the_weights_and_floored_at_the_value_scale(pendulum_path):
+    """Defaults: the look-ahead sum divided by sum gamma^i, and |Q| floored at mean|r| / (1 - gamma).
+
+    With a critic that returns the same small Q everywhere, the paper's form gives ``-sum_i gamma^i``
+    (3.94 at T = 3); the defaults give ``-Q / floor``, as at T = 0.
+    """
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=3))
+    model.learn(1)
+    floor = float(model.replay_buffer.rewards.abs().mean()) / (1 - model.gamma)
+    assert model.q_scale_floor_value == pytest.approx(floor, rel=1e-5)
+    model.lookahead_uncertainty_cutoff = None
+    model._termination_fn = lambda s, a, s2: th.zeros(s.shape[0], dtype=th.bool)
+    constant = 0.5 * floor
+    model.critic.forward = lambda obs, act: th.full((model.n_critics, obs.shape[0]), constant)  # type: ignore[method-assign]
+    obs = model.replay_buffer.sample(8).observations
+    loss, _ = model._lookahead_q_loss(obs, model.policy.actor_features(obs))
+    assert loss.item() == pytest.approx(-constant / floor)
+    paper = POLA(
+        "MlpPolicy",
+        dataset=pendulum_path,
+        **light_kwargs(rollout_length=3, lookahead_normalization="first", q_scale_floor=None),
+    )
+    paper.learn(1)
+    paper._termination_fn = model._termination_fn
+    paper.critic.forward = model.critic.forward  # type: ignore[method-assign]
+    paper_loss, _ = paper._lookahead_q_loss(obs, paper.policy.actor_features(obs))
+    assert paper_loss.item() == pytest.approx(-sum(paper.gamma**i for i in range(4)))

@@ -49,6 +49,9 @@ from sb3_pola.experiments.diagnostics import write_diagnostics
 
 # ----------------------------------------------------------------------------------------- variants
 
+# POLA arguments of the paper's form of the Q term, where the package's defaults depart from it
+PAPER_FORM: dict[str, Any] = {"lookahead_normalization": "first", "q_scale_floor": None}
+
 # name -> (label for legends, POLA keyword arguments, policy_kwargs)
 VARIANTS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     "T0": ("POLA T=0 (no look-ahead)", {"rollout_length": 0}, {}),
@@ -59,11 +62,14 @@ VARIANTS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     "T3-noproducts": ("T=3, no products", {"rollout_length": 3, "use_state_products": False}, {}),
     "T3-criticproducts": ("T=3, products in actor and critic", {"rollout_length": 3}, {"critic_state_products": True}),
     "BC": ("BC (diffusion actor, eta=0)", {"rollout_length": 0, "eta": 0.0}, {}),
+    # the paper's form of the Q term (eq. 3/4 as written, Diffusion-QL's |Q| normalisation), next to the defaults
+    "T0-paperform": ("T=0, paper's Q term", {"rollout_length": 0, **PAPER_FORM}, {}),
+    "T3-paperform": ("T=3, paper's Q term", {"rollout_length": 3, **PAPER_FORM}, {}),
 }
 ALL_VARIANTS = list(VARIANTS)
 # the variants of each figure (paper Fig. 3 and Fig. 4); BC is drawn in both as the floor
 FIGURES: dict[str, list[str]] = {
-    "rollout": ["T0", "T1", "T3", "T5", "BC"],
+    "rollout": ["T0", "T1", "T3", "T5", "T3-paperform", "BC"],
     "products": ["T3", "T3-noproducts", "T3-criticproducts", "T0", "T0-noproducts", "BC"],
 }
 
@@ -163,7 +169,8 @@ PRESETS: dict[str, Config] = {
         share_dynamics=True,
         extra={"compile_update": True},
     ),
-    # the paper's configuration (N = 10, 3 x 256, batch 256), Diffusion-QL's 50 candidate actions
+    # the paper's configuration (N = 10, 3 x 256, batch 256, the paper's form of the Q term), Diffusion-QL's
+    # 50 candidate actions
     "paper": Config(
         preset="paper",
         steps=1_000_000,
@@ -174,6 +181,7 @@ PRESETS: dict[str, Config] = {
         n_critics=10,
         top_k=2,
         n_action_samples=50,
+        extra=dict(PAPER_FORM),
     ),
 }
 DEFAULT_DATASETS = ["halfcheetah/medium-v0", "halfcheetah/medium-replay-v0"]
@@ -669,6 +677,8 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
         "T3-noproducts": "tab:cyan",
         "T0-noproducts": "tab:olive",
         "T3-criticproducts": "tab:purple",
+        "T3-paperform": "tab:brown",
+        "T0-paperform": "tab:pink",
         "BC": "tab:gray",
     }
     for dataset in dict.fromkeys(r["dataset"] for r in rows):
