@@ -208,14 +208,15 @@ def test_predict_actor_online_uses_the_trained_actor(pendulum_path, tmp_path):
         POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(policy_kwargs={"net_arch": [8], "predict_actor": "x"}))
 
 
-# ---------------------------------------------------------------- the defaults that depart from the paper
-def test_default_q_term_is_normalised_by_the_weights_and_floored_at_the_value_scale(pendulum_path):
-    """Defaults: the look-ahead sum divided by sum gamma^i, and |Q| floored at mean|r| / (1 - gamma).
+# ---------------------------------------------------------------- the paper's form (default) and the weakened one
+def test_floor_and_weights_against_the_default_paper_form(pendulum_path):
+    """The weakened form: the look-ahead sum divided by sum gamma^i, and |Q| floored at mean|r| / (1 - gamma).
 
-    With a critic that returns the same small Q everywhere, the paper's form gives ``-sum_i gamma^i``
-    (3.94 at T = 3); the defaults give ``-Q / floor``, as at T = 0.
+    With a critic that returns the same small Q everywhere, the default (paper's) form gives
+    ``-sum_i gamma^i`` (3.94 at T = 3); the weakened form gives ``-Q / floor``, as at T = 0.
     """
-    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=3))
+    options = dict(lookahead_normalization="weights", q_scale_floor="auto")
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=3, **options))
     model.learn(1)
     floor = float(model.replay_buffer.rewards.abs().mean()) / (1 - model.gamma)
     assert model.q_scale_floor_value == pytest.approx(floor, rel=1e-5)
@@ -226,11 +227,7 @@ def test_default_q_term_is_normalised_by_the_weights_and_floored_at_the_value_sc
     obs = model.replay_buffer.sample(8).observations
     loss, _ = model._lookahead_q_loss(obs, model.policy.actor_features(obs))
     assert loss.item() == pytest.approx(-constant / floor)
-    paper = POLA(
-        "MlpPolicy",
-        dataset=pendulum_path,
-        **light_kwargs(rollout_length=3, lookahead_normalization="first", q_scale_floor=None),
-    )
+    paper = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=3))  # the defaults
     paper.learn(1)
     paper._termination_fn = model._termination_fn
     paper.critic.forward = model.critic.forward  # type: ignore[method-assign]

@@ -49,8 +49,9 @@ from sb3_pola.experiments.diagnostics import write_diagnostics
 
 # ----------------------------------------------------------------------------------------- variants
 
-# POLA arguments of the paper's form of the Q term, where the package's defaults depart from it
+# POLA arguments of the paper's form of the Q term (the defaults), and of the weakened form of issue #12
 PAPER_FORM: dict[str, Any] = {"lookahead_normalization": "first", "q_scale_floor": None}
+FLOOR_FORM: dict[str, Any] = {"lookahead_normalization": "weights", "q_scale_floor": "auto"}
 
 # name -> (label for legends, POLA keyword arguments, policy_kwargs)
 VARIANTS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
@@ -62,14 +63,14 @@ VARIANTS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     "T3-noproducts": ("T=3, no products", {"rollout_length": 3, "use_state_products": False}, {}),
     "T3-criticproducts": ("T=3, products in actor and critic", {"rollout_length": 3}, {"critic_state_products": True}),
     "BC": ("BC (diffusion actor, eta=0)", {"rollout_length": 0, "eta": 0.0}, {}),
-    # the paper's form of the Q term (eq. 3/4 as written, Diffusion-QL's |Q| normalisation), next to the defaults
-    "T0-paperform": ("T=0, paper's Q term", {"rollout_length": 0, **PAPER_FORM}, {}),
-    "T3-paperform": ("T=3, paper's Q term", {"rollout_length": 3, **PAPER_FORM}, {}),
+    # the weakened Q term of issue #12: |Q| floored at the dataset's value scale, look-ahead sum / sum gamma^i
+    "T0-floor": ("T=0, Q-scale floor", {"rollout_length": 0, **FLOOR_FORM}, {}),
+    "T3-floor": ("T=3, Q-scale floor, weights normalised", {"rollout_length": 3, **FLOOR_FORM}, {}),
 }
 ALL_VARIANTS = list(VARIANTS)
 # the variants of each figure (paper Fig. 3 and Fig. 4); BC is drawn in both as the floor
 FIGURES: dict[str, list[str]] = {
-    "rollout": ["T0", "T1", "T3", "T5", "T3-paperform", "BC"],
+    "rollout": ["T0", "T1", "T3", "T5", "T3-floor", "BC"],
     "products": ["T3", "T3-noproducts", "T3-criticproducts", "T0", "T0-noproducts", "BC"],
 }
 
@@ -677,8 +678,8 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
         "T3-noproducts": "tab:cyan",
         "T0-noproducts": "tab:olive",
         "T3-criticproducts": "tab:purple",
-        "T3-paperform": "tab:brown",
-        "T0-paperform": "tab:pink",
+        "T3-floor": "tab:brown",
+        "T0-floor": "tab:pink",
         "BC": "tab:gray",
     }
     for dataset in dict.fromkeys(r["dataset"] for r in rows):

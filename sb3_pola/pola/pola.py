@@ -111,13 +111,11 @@ class POLA(OfflineAlgorithm):
     MuJoCo rule for the env, or the model's learned termination head when the env is unknown)
     marks terminal contribute no Q term, and neither do any states after them.
 
-    Two defaults depart from the paper's form, on the evidence of ``docs/results.md`` (HalfCheetah,
-    10,000 steps, CPU preset), where each was less harmful than the paper's form at the same budget:
-    ``lookahead_normalization="weights"`` (the look-ahead sum of eq. 3/4 divided by ``sum_i gamma^i``,
-    so the Q term does not weigh about ``T + 1`` times more at ``T = 3`` than at ``T = 0``) and
-    ``q_scale_floor="auto"`` (the Q term divided by at least the dataset's value scale, so an immature
-    critic pulls the actor weakly). ``lookahead_normalization="first", q_scale_floor=None`` is the
-    paper's form (and Diffusion-QL's normalisation).
+    The defaults are the paper's form of the Q term. ``lookahead_normalization="weights"`` with
+    ``q_scale_floor="auto"`` weakens it (``docs/results.md``): on HalfCheetah at 10,000 steps it was
+    less harmful than the paper's form, but it still fell below behaviour cloning on medium data, and
+    on the shipped InvertedPendulum data it stopped the Q term's lift (162 at 5,000 steps against
+    1000 with the defaults), so it is an option, not the default.
 
     :param policy: policy class or alias (``"MlpPolicy"``)
     :param env: env (or id) for evaluation callbacks; made from the dataset's metadata if ``None``
@@ -132,14 +130,13 @@ class POLA(OfflineAlgorithm):
     :param eta: weight of the Q term in the actor loss (``0`` = behaviour cloning): a float, or an SB3
         ``Schedule`` of the remaining progress (1 at the start of ``learn``, 0 at the end), e.g.
         :func:`~sb3_pola.common.schedules.warmup_schedule` for a behaviour-cloning warm-up
-    :param lookahead_normalization: ``"weights"`` (default, departs from the paper): the ``T + 1``
-        weighted Q terms are divided by ``sum_i gamma^i`` as well as by ``mean |Q|`` of the first, so
-        ``eta`` weighs the Q term the same for every ``T``; ``"first"`` (eq. 3/4 as written): divided
-        by ``mean |Q|`` of the first only, so the Q term's weight grows with ``T`` (``sum_i gamma^i``,
-        3.94 at ``T = 3``)
+    :param lookahead_normalization: ``"first"`` (default, eq. 3/4 as written): the ``T + 1`` weighted
+        Q terms are summed and divided by ``mean |Q|`` of the first, so the Q term's weight grows with
+        ``T`` (``sum_i gamma^i``, 3.94 at ``T = 3``); ``"weights"``: also divided by ``sum_i gamma^i``,
+        so ``eta`` weighs the Q term the same for every ``T``
     :param q_scale_floor: lower bound of the detached ``mean |Q|`` that divides the Q term. ``None``:
-        Diffusion-QL's batch mean alone. ``"auto"`` (default, departs from Diffusion-QL): the dataset's
-        value scale ``mean |r| / (1 - gamma)``,
+        Diffusion-QL's batch mean alone (default). ``"auto"``: the dataset's value scale
+        ``mean |r| / (1 - gamma)``,
         so while the critic is immature (``|Q|`` far below the returns it will reach) its gradient pulls
         the actor in proportion to how far it has learned, instead of at full strength from the first step.
         A float: that floor
@@ -196,8 +193,8 @@ class POLA(OfflineAlgorithm):
         top_k: int = 2,
         rollout_length: int = 3,
         eta: float | Schedule = 1.0,
-        lookahead_normalization: str = "weights",
-        q_scale_floor: float | str | None = "auto",
+        lookahead_normalization: str = "first",
+        q_scale_floor: float | str | None = None,
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
         backprop_through_model: bool = True,
