@@ -57,6 +57,11 @@ def _eager_fallback(compiled: Callable[..., Any], eager: Callable[..., Any]) -> 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
 
 
+def lookahead_weights(gamma_powers: th.Tensor, normalization: str) -> th.Tensor:
+    """``[T+1]`` weights of the look-ahead terms: ``gamma^i`` (eq. 3), or divided by their sum (``"weights"``)."""
+    return gamma_powers / gamma_powers.sum() if normalization == "weights" else gamma_powers
+
+
 def lookahead_q_objective(
     q: th.Tensor,
     alive: th.Tensor,
@@ -81,8 +86,7 @@ def lookahead_q_objective(
     per_step = (alive * q_top_k).mean(dim=1)  # [T+1]
     # scale-free Q term (Diffusion-QL): divide by the detached mean |Q| at the current states
     q_scale = q_top_k[0].abs().mean().detach().clamp_min(max(q_scale_floor, 1e-6))
-    weights = gamma_powers / gamma_powers.sum() if normalization == "weights" else gamma_powers
-    return -(weights * per_step).sum() / q_scale, per_step
+    return -(lookahead_weights(gamma_powers, normalization) * per_step).sum() / q_scale, per_step
 
 
 class POLA(OfflineAlgorithm):
@@ -435,7 +439,7 @@ class POLA(OfflineAlgorithm):
         else:
             q_loss = th.zeros((), device=obs.device)
             actor_loss = bc_loss
-        return actor_loss, {"bc_loss": bc_loss.detach(), "q_loss": q_loss.detach(), "eta": eta.detach().clone(), **stats}
+        return actor_loss, {"bc_loss": bc_loss.detach(), "q_loss": q_loss.detach(), "eta": eta.detach(), **stats}
 
     def _loss_fns(self) -> tuple[Any, Any]:
         """The critic and actor loss functions: the methods themselves, or their ``torch.compile``'d graphs.
@@ -505,9 +509,7 @@ class POLA(OfflineAlgorithm):
         if horizon > 0:
             doubt = th.stack(disagreements).mean(dim=1)  # [T]
             if self.lookahead_uncertainty_penalty > 0:
-                weights = self._gamma_powers[1:]
-                if self.lookahead_normalization == "weights":
-                    weights = weights / self._gamma_powers.sum()
+                weights = lookahead_weights(self._gamma_powers, self.lookahead_normalization)[1:]
                 q_loss = q_loss + self.lookahead_uncertainty_penalty * (weights * doubt).sum()
             stats.update({f"lookahead_uncertainty_{i + 1}": doubt[i].detach() for i in range(horizon)})
         return q_loss, stats
