@@ -163,11 +163,15 @@ def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.
     assert all(0 <= r["train/action_saturation"] <= 1 for r in train_rows)
     assert (out / "models" / f"{name}.zip").exists()
     final = score.read_rows(out / "scores.csv")[-1]
-    assert score.main(["--out", str(out), "--reevaluate", "ema", "online", "candidates3", "-v", "0"]) == 0
+    rules = ["ema", "online", "candidates3", "stochastic"]
+    assert score.main(["--out", str(out), "--reevaluate", *rules, "-v", "0"]) == 0
     rows = {r["rule"]: r for r in score.reevaluate(out, ["ema"], 1, "cpu", verbose=0)}  # already done: skipped, read back
-    assert set(rows) == {"ema", "online", "candidates3"}
+    assert set(rows) == set(rules)
     assert float(rows["ema"]["score"]) == pytest.approx(final["score"])  # same rule, same resets: the run's final score
     assert "| test/pendulum-v0 | T1 | candidates3 |" in (out / "reeval.md").read_text()
+    (out / "reeval.csv").unlink()
+    again = score.reevaluate(out, ["stochastic"], 1, "cpu", verbose=0)
+    assert float(again[-1]["mean_return"]) == pytest.approx(float(rows["stochastic"]["mean_return"]))  # seeded sampling
     with pytest.raises(ValueError, match="unknown evaluation rule"):
         score.main(["--out", str(out), "--reevaluate", "best-of-3"])
     # diagnostics.md: the end-of-training statistics of the cell, with the look-ahead growth q_1 / q_0
@@ -177,6 +181,16 @@ def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.
     assert summary["lookahead_growth"] == pytest.approx(summary["lookahead_q_1"] / summary["lookahead_q_0"])
     assert row.split(" | ")[1] == "6"
     assert diagnostics.plot_lookahead(out) == out / "fig_lookahead.png"
+
+
+def test_eval_rules() -> None:
+    assert score.parse_eval_rule("ema") == ("ema", 1, True)
+    assert score.parse_eval_rule("online-stochastic") == ("online", 1, False)
+    assert score.parse_eval_rule("candidates10") == ("ema", 10, True)
+    assert score.parse_eval_rule("online-candidates2") == ("online", 2, True)
+    for bad in ("candidates0", "stochastic3", "best"):
+        with pytest.raises(ValueError, match="unknown evaluation rule"):
+            score.parse_eval_rule(bad)
 
 
 def test_eta_warmup_from_json() -> None:

@@ -16,8 +16,8 @@ dataset's env (D4RL-normalised score from the dataset's reference scores). Outpu
   resumed run).
 
 ``--reevaluate RULE ...`` evaluates the saved final models again under other evaluation rules
-(``ema``, ``online``, ``candidates<N>``: N noisy candidates ranked by the critic, as Diffusion-QL
-evaluates) and writes ``reeval.csv`` and ``reeval.md``.
+(``ema``, ``online``, ``stochastic``: one sample of the noisy reverse chain, ``candidates<N>``: N noisy
+candidates ranked by the critic, as Diffusion-QL evaluates) and writes ``reeval.csv`` and ``reeval.md``.
 
 An interrupted run is resumed by the same command: finished cells are skipped, a running cell
 continues from its last checkpoint. Presets: ``cpu`` (light networks, a few thousand steps),
@@ -244,30 +244,36 @@ def cell_name(dataset: str, variant: str, seed: int) -> str:
     return f"{slug(dataset)}__{variant}__seed{seed}"
 
 
-def evaluate(model: Any, env: Any, n_episodes: int, seed: int) -> np.ndarray:
-    """Returns of ``n_episodes`` deterministic episodes of the model's EMA policy (episode ``i`` reset with ``seed + i``).
+def evaluate(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool = True) -> np.ndarray:
+    """Returns of ``n_episodes`` episodes of the model's policy (episode ``i`` reset with ``seed + i``).
 
     :param model: a POLA model
     :param env: a Gymnasium env (not vectorised)
     :param n_episodes: number of episodes
-    :param seed: seed of the first episode's reset
+    :param seed: seed of the first episode's reset; with ``deterministic=False`` it also seeds torch, so the
+        sampled actions repeat
+    :param deterministic: ``model.predict``'s flag
     :return: ``[n_episodes]`` undiscounted returns
     """
+    import torch as th
+
+    if not deterministic:
+        th.manual_seed(seed)
     returns = np.zeros(n_episodes)
     for i in range(n_episodes):
         obs, _ = env.reset(seed=seed + i)
         done = False
         while not done:
-            action, _ = model.predict(obs, deterministic=True)
+            action, _ = model.predict(obs, deterministic=deterministic)
             obs, reward, terminated, truncated, _ = env.step(action)
             returns[i] += float(reward)
             done = terminated or truncated
     return returns
 
 
-def evaluation_scores(model: Any, env: Any, n_episodes: int, seed: int) -> dict[str, Any]:
+def evaluation_scores(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool = True) -> dict[str, Any]:
     """The CSV columns of one evaluation of a cell's model (the resets of seed ``seed``'s protocol)."""
-    returns = evaluate(model, env, n_episodes, seed=10_000 * (seed + 1))
+    returns = evaluate(model, env, n_episodes, seed=10_000 * (seed + 1), deterministic=deterministic)
     scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
     return {
         "score": round(float(np.mean(scores)), 3),
@@ -454,25 +460,30 @@ def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib
 # ----------------------------------------------------------------------------------------- re-evaluation
 
 
-def apply_eval_rule(model: Any, rule: str) -> None:
-    """Set how ``model.predict`` picks actions.
+def apply_eval_rule(model: Any, rule: str) -> bool:
+    """Set how ``model.predict`` picks actions; return the ``deterministic`` flag to call it with.
 
     :param model: a POLA model
     :param rule: ``ema`` (the noise-free chain of the EMA actor, the default), ``online`` (the same chain of
-        the trained actor) or ``candidates<N>`` / ``online-candidates<N>`` (N noisy candidates of the EMA /
-        online actor, the one with the highest pessimistic Q kept, as Diffusion-QL evaluates)
+        the trained actor), ``stochastic`` / ``online-stochastic`` (one sample of the noisy reverse chain, the
+        policy Diffusion-QL trains) or ``candidates<N>`` / ``online-candidates<N>`` (N noisy candidates of the
+        EMA / online actor, the one with the highest pessimistic Q kept, as Diffusion-QL evaluates)
     """
-    model.policy.predict_actor, model.policy.n_action_samples = parse_eval_rule(rule)
+    model.policy.predict_actor, model.policy.n_action_samples, deterministic = parse_eval_rule(rule)
+    return deterministic
 
 
-def parse_eval_rule(rule: str) -> tuple[str, int]:
-    """``(predict_actor, n_action_samples)`` of an evaluation rule (see :func:`apply_eval_rule`)."""
+def parse_eval_rule(rule: str) -> tuple[str, int, bool]:
+    """``(predict_actor, n_action_samples, deterministic)`` of an evaluation rule (see :func:`apply_eval_rule`)."""
+    match = re.fullmatch(r"(online-)?(stochastic|candidates(\d+))", rule)
     if rule in ("ema", "online"):
-        return rule, 1
-    match = re.fullmatch(r"(online-)?candidates(\d+)", rule)
-    if match is None or int(match.group(2)) < 1:
-        raise ValueError(f"unknown evaluation rule {rule!r}: ema, online, candidates<N> or online-candidates<N>")
-    return ("online" if match.group(1) else "ema"), int(match.group(2))
+        return rule, 1, True
+    if match is None or (match.group(3) is not None and int(match.group(3)) < 1):
+        raise ValueError(f"unknown evaluation rule {rule!r}: ema, online, [online-]stochastic or [online-]candidates<N>")
+    actor = "online" if match.group(1) else "ema"
+    if match.group(2) == "stochastic":
+        return actor, 1, False
+    return actor, int(match.group(3)), True
 
 
 def reevaluate(out: pathlib.Path, rules: list[str], episodes: int, device: str, verbose: int = 1) -> list[dict[str, Any]]:
@@ -502,14 +513,14 @@ def reevaluate(out: pathlib.Path, rules: list[str], episodes: int, device: str, 
         for rule in rules:
             if (dataset + variant + str(seed), rule) in done:
                 continue
-            apply_eval_rule(model, rule)
+            deterministic = apply_eval_rule(model, rule)
             row = {
                 "dataset": dataset,
                 "variant": variant,
                 "seed": seed,
                 "rule": rule,
                 "step": model.num_timesteps,
-                **evaluation_scores(model, env, episodes, seed),
+                **evaluation_scores(model, env, episodes, seed, deterministic=deterministic),
             }
             new = not csv_path.exists()
             with csv_path.open("a", newline="") as f:
@@ -793,7 +804,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--reevaluate",
         nargs="+",
         metavar="RULE",
-        help="evaluate the saved final models again under these rules (ema, online, candidates<N>, online-candidates<N>)",
+        help="re-evaluate the saved final models under these rules: ema, online, [online-]stochastic, [online-]candidates<N>",
     )
     parser.add_argument("--report-only", action="store_true", help="only rewrite table.md and the figures from scores.csv")
     parser.add_argument("--dry-run", action="store_true", help="print the resolved configuration and the cells, run nothing")
