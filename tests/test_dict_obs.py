@@ -112,8 +112,18 @@ def test_env_with_dict_observations(goal_dataset: str) -> None:
     model.learn(2)
     model = POLA("MlpPolicy", env="GoalPendulum-v0", dataset=goal_dataset, **light_kwargs(rollout_length=0))
     assert model.observation_space.shape == (5,)
-    with pytest.raises(ValueError, match="VecEnv with Dict observations"):
-        POLA("MlpPolicy", env=DummyVecEnv([lambda: gym.make("GoalPendulum-v0")]), dataset=goal_dataset, **light_kwargs())
+    venv = DummyVecEnv([lambda: gym.make("GoalPendulum-v0")] * 2)
+    model = POLA("MlpPolicy", env=venv, dataset=goal_dataset, **light_kwargs(rollout_length=0))
+    assert model.observation_space.shape == (5,) and model.dict_observation_space == venv.observation_space
+    assert model.env is not None
+    model.env.seed(1)
+    first = model.env.reset()
+    assert first.shape == (2, 5)
+    raw = gym.make("GoalPendulum-v0").reset(seed=1)[0]
+    np.testing.assert_allclose(first[0], gym.spaces.flatten(venv.observation_space, raw), rtol=1e-6)
+    obs, _, dones, _ = model.env.step(np.zeros((2, 1), dtype=np.float32))
+    assert obs.shape == (2, 5) and not dones.any()
+    model.learn(2)
 
 
 def test_save_load_keeps_the_dict_space(goal_model: POLA, goal_dataset: str, tmp_path: pathlib.Path) -> None:

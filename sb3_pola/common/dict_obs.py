@@ -15,6 +15,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
 
 def check_dict_space(space: spaces.Dict, where: str) -> None:
@@ -75,9 +77,37 @@ def flatten_observation(space: spaces.Dict, observation: dict[str, Any]) -> np.n
     return np.concatenate(parts, axis=-1)
 
 
-def flatten_env(env: gym.Env) -> gym.Env:
+class VecFlattenObservation(VecEnvWrapper):
+    """A VecEnv's dict observations flattened as :func:`flatten_observation` does (``FlattenObservation`` for VecEnvs).
+
+    :param venv: a VecEnv with a ``Dict`` of ``Box`` observation space
+    """
+
+    def __init__(self, venv: VecEnv) -> None:
+        assert isinstance(venv.observation_space, spaces.Dict)
+        check_dict_space(venv.observation_space, f"VecEnv {venv}")
+        self.dict_space = venv.observation_space
+        super().__init__(venv, observation_space=flat_space(self.dict_space))
+
+    def _flatten(self, obs: Any) -> np.ndarray:
+        return flatten_observation(self.dict_space, obs).astype(self.observation_space.dtype)
+
+    def reset(self) -> VecEnvObs:
+        return self._flatten(self.venv.reset())
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        for info in infos:  # SB3 keeps the last observation of an episode here, as the env returned it
+            if isinstance(info.get("terminal_observation"), dict):
+                info["terminal_observation"] = self._flatten(info["terminal_observation"])
+        return self._flatten(obs), rewards, dones, infos
+
+
+def flatten_env(env: gym.Env | VecEnv) -> Any:
     """``env`` with its dict observations flattened (as the dataset's), or ``env`` itself if they are flat already."""
-    if isinstance(env.observation_space, spaces.Dict):
-        check_dict_space(env.observation_space, f"env {env}")
-        return gym.wrappers.FlattenObservation(env)
-    return env
+    if not isinstance(env.observation_space, spaces.Dict):
+        return env
+    if isinstance(env, VecEnv):
+        return VecFlattenObservation(env)
+    check_dict_space(env.observation_space, f"env {env}")
+    return gym.wrappers.FlattenObservation(env)

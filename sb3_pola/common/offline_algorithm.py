@@ -20,7 +20,6 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList, Conve
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.checkpoint import DivergenceError, validate_model_file
@@ -97,14 +96,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         data: OfflineDataset | None = None
         if isinstance(env, str):  # made here rather than by SB3, so that dict observations can be flattened
             env = gym.make(env)
-        if isinstance(env, VecEnv) and isinstance(env.observation_space, spaces.Dict):
-            raise ValueError(
-                f"A VecEnv with Dict observations ({env.observation_space}): pass a gymnasium.Env (flattened here), "
-                "or flatten each env with gymnasium.wrappers.FlattenObservation"
-            )
-        env_dict_space = (
-            env.observation_space if isinstance(env, gym.Env) and isinstance(env.observation_space, spaces.Dict) else None
-        )
+        env_dict_space = env.observation_space if env is not None and isinstance(env.observation_space, spaces.Dict) else None
         if isinstance(dataset, OfflineDataset):
             data = dataset
         elif dataset is not None:
@@ -112,7 +104,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
             data = load_offline_dataset(dataset, env=env, download=download)  # type: ignore[arg-type]
             if env is None:
                 env = self._env_from_dataset(data, verbose)
-        if isinstance(env, gym.Env):
+        if env is not None:
             env = flatten_env(env)
         super().__init__(
             policy,
@@ -377,8 +369,6 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         if isinstance(path, str | os.PathLike):
             policies = tuple(dict.fromkeys(cls.policy_aliases.values()))
             data = validate_model_file(path, policies, cls.__name__)
-            if isinstance(env, VecEnv) and isinstance(env.observation_space, spaces.Dict):
-                raise ValueError(f"Cannot load {path} onto a VecEnv with Dict observations: pass a gymnasium.Env")
             if env is not None:
                 obs_space, act_space = env.observation_space, env.action_space
                 model_obs_space = data["observation_space"]
@@ -392,7 +382,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
                         f"and action space {data['action_space']}, the env has observation space {obs_space} "
                         f"and action space {act_space}"
                     )
-            if isinstance(env, gym.Env):
+            if env is not None:
                 env = flatten_env(env)
         return super().load(  # type: ignore[return-value]
             path,
