@@ -152,3 +152,17 @@ def test_flat_model_refuses_dict_observations(goal_model: POLA, tmp_path: pathli
     with pytest.raises(ValueError, match=r"dict observation.*pass an array"):
         model.predict({"observation": np.zeros(3)})
     assert isinstance(load_offline_dataset(str(data)), OfflineDataset)
+
+
+def test_make_env_prefers_the_eval_env_spec(tmp_path: pathlib.Path) -> None:
+    """Minari's ``eval_env_spec`` (the mazes: a fixed goal) is the env to evaluate in; ``env_spec`` the one collected in."""
+    import json
+
+    path = record_random_dataset(tmp_path, "pendulum/random-v0", "Pendulum-v1", 20)
+    metadata_file = path / "data" / "metadata.json"
+    metadata = json.loads(metadata_file.read_text())
+    spec = json.loads(metadata["env_spec"])
+    metadata["eval_env_spec"] = json.dumps({**spec, "max_episode_steps": 77})
+    metadata_file.write_text(json.dumps(metadata))
+    assert make_env(str(path)).spec.max_episode_steps == 77
+    assert make_env(str(path), eval_env=False).spec.max_episode_steps == spec["max_episode_steps"]

@@ -566,12 +566,15 @@ def load_offline_dataset(
     )
 
 
-def make_env(dataset: OfflineDataset | str | os.PathLike, **env_kwargs: Any) -> gym.Env:
-    """The environment a dataset was recorded in, from its Minari ``env_spec`` (with its time limit).
+def make_env(dataset: OfflineDataset | str | os.PathLike, eval_env: bool = True, **env_kwargs: Any) -> gym.Env:
+    """The environment to evaluate a policy of the dataset in, from its Minari env spec (with its time limit).
 
-    Dict observations come flattened, in the order of the dataset's arrays (``FlattenObservation``).
+    Minari datasets may record an ``eval_env_spec`` next to the ``env_spec`` they were collected in (the
+    maze datasets: a fixed goal, as D4RL evaluates); it is preferred, as ``recover_environment(eval_env=True)``
+    does. Dict observations come flattened, in the order of the dataset's arrays (``FlattenObservation``).
 
     :param dataset: a loaded dataset, or a Minari id / dataset folder
+    :param eval_env: prefer the ``eval_env_spec``; ``False``: the env the data was collected in
     :param env_kwargs: extra arguments for ``gym.make`` (e.g. ``render_mode``)
     :return: a new environment
     """
@@ -581,6 +584,8 @@ def make_env(dataset: OfflineDataset | str | os.PathLike, **env_kwargs: Any) -> 
             return flatten_env(gym.make(dataset.env_id, **env_kwargs))
     else:
         metadata = read_metadata(resolve_dataset_path(dataset))
+    if eval_env and metadata.get("eval_env_spec"):
+        metadata = {**metadata, "env_spec": metadata["eval_env_spec"]}
     spec_str = metadata.get("env_spec")
     if not spec_str:
         raise DatasetError(f"Dataset {metadata.get('dataset_id')!r} records no environment (env_spec)")
