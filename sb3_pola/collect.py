@@ -14,6 +14,9 @@ mean return over ``--ref-episodes`` (>= 10) episodes. Written with
 ``minari.create_dataset_from_buffers`` (``DataCollector`` needs jax) under ``--out`` or
 ``$MINARI_DATASETS_PATH`` as ``<envname>/<kind>-v<version>``.
 
+Gymnasium-Robotics point mazes (``--env PointMaze_UMaze-v3`` etc.) have their own kinds and
+options: :mod:`sb3_pola.collect_maze` (``sb3-pola collect --env PointMaze_UMaze-v3 --help``).
+
 Example::
 
     sb3-pola collect --env InvertedPendulum-v5 --kind medium medium-replay --steps 30000 \\
@@ -341,12 +344,14 @@ def write_dataset(
     overwrite: bool,
     eval_env: str | EnvSpec | None = None,
     extra_metadata: dict[str, Any] | None = None,
+    code_permalink: str = "sb3_pola/collect.py",
 ) -> pathlib.Path:
     """Create the Minari dataset in a temporary root, then move it in place (no half-written dataset).
 
     :param env_id: the env the data was recorded in (id or spec: its ``env_spec``)
     :param eval_env: the env to evaluate in (its ``eval_env_spec``); default ``env_id``
     :param extra_metadata: more keys for ``metadata.json``
+    :param code_permalink: the code that made the data
     """
     import minari
 
@@ -365,7 +370,7 @@ def write_dataset(
             algorithm_name=algorithm_name,
             author="sb3-pola collect",
             author_email="none@example.org",
-            code_permalink="sb3_pola/collect.py",
+            code_permalink=code_permalink,
             ref_min_score=ref_min,
             ref_max_score=ref_max,
             num_episodes_average_score=ref_episodes,
@@ -403,7 +408,10 @@ def datasets_root(out: str | None) -> pathlib.Path:
 
 def make_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="sb3-pola collect", description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="sb3-pola collect",
+        description=__doc__.split("\n\n")[0],
+        epilog="Point mazes have their own kinds and options: sb3-pola collect --env PointMaze_UMaze-v3 --help",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--env", required=True, help="Gymnasium env id with continuous actions, e.g. InvertedPendulum-v5")
     parser.add_argument("--kind", nargs="+", choices=KINDS, default=["medium"], help="dataset kind(s) to make")

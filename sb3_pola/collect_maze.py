@@ -313,6 +313,7 @@ def main(argv: list[str] | None = None) -> int:
             args.overwrite,
             eval_env=eval_spec,
             extra_metadata=extra,
+            code_permalink="sb3_pola/collect_maze.py",
         )
         summary["datasets"][dataset_id] = dataset_summary(path, episodes)
     summary["seconds"] = round(time.perf_counter() - start_time, 1)
