@@ -21,7 +21,9 @@ other cell, the goal is kept once reached, and episodes last the env's time limi
 so the return counts the steps spent at the goal. ``ref_min_score`` is the mean return of uniform
 random actions there, ``ref_max_score`` that of the planner without noise, each over
 ``--ref-episodes`` (>= 10) episodes; their success rates (an episode with a step within 0.45 of the
-goal) go into the metadata as ``ref_min_success_rate`` / ``ref_max_success_rate``.
+goal) go into the metadata as ``ref_min_success_rate`` / ``ref_max_success_rate``, and those of the
+policy that recorded the data (the noisy planner, or random actions) as ``behavior_eval_return`` /
+``behavior_eval_success_rate``.
 
 Datasets are written like :mod:`sb3_pola.collect`'s: ``<name>/<maze>-v<version>`` (planner) and
 ``<name>/<maze>-random-v<version>`` under ``--out`` or ``$MINARI_DATASETS_PATH``; ``<name>`` is
@@ -295,11 +297,17 @@ def main(argv: list[str] | None = None) -> int:
             algorithm = f"maze planner (BFS over cells, PD p_gain {args.p_gain}, d_gain {args.d_gain}), noise std {args.noise}"
             description = f"D4RL maze2d-style: {algorithm}; a new goal on reaching one; episodes of {episode_steps} steps"
             episodes = rollout(env, policy, args.steps, seed, not args.no_progress, dataset_id)
+            noisy = planner_for(eval_env, noise=args.noise, seed=seed + 500, **gains)
+            behavior_returns, behavior_success = run_episodes(eval_env, noisy, args.ref_episodes, args.seed + 30_000)
         else:
             algorithm = "uniform random actions"
             description = f"uniform random actions; a new goal on reaching one; episodes of {episode_steps} steps"
             episodes = rollout(env, None, args.steps, seed, not args.no_progress, dataset_id)
+            behavior_returns, behavior_success = random_returns, random_success
         extra = {key: value for key, value in references.items() if key.endswith("success_rate")}
+        extra.update(
+            behavior_eval_return=float(np.mean(behavior_returns)), behavior_eval_success_rate=float(np.mean(behavior_success))
+        )
         path = write_dataset(
             out_root,
             dataset_id,
@@ -315,7 +323,7 @@ def main(argv: list[str] | None = None) -> int:
             extra_metadata=extra,
             code_permalink="sb3_pola/collect_maze.py",
         )
-        summary["datasets"][dataset_id] = dataset_summary(path, episodes)
+        summary["datasets"][dataset_id] = {**dataset_summary(path, episodes), **extra}
     summary["seconds"] = round(time.perf_counter() - start_time, 1)
     print(json.dumps(summary, indent=2))
     return 0

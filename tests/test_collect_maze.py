@@ -109,6 +109,8 @@ def test_collect_dict_dataset(tmp_path, monkeypatch):
         metadata = dataset.storage.metadata
         assert metadata["ref_min_score"] < metadata["ref_max_score"]
         assert metadata["ref_min_success_rate"] < metadata["ref_max_success_rate"] == 1.0
+        behavior = metadata["behavior_eval_return"]  # the noisy planner's return in the eval env, or random's
+        assert behavior > metadata["ref_min_score"] if "random" not in dataset_id else behavior == metadata["ref_min_score"]
         assert dataset.recover_environment().spec.kwargs["reset_target"]
         eval_env = dataset.recover_environment(eval_env=True)
         assert eval_env.spec.max_episode_steps == 150 and eval_env.spec.kwargs["maze_map"][1][1] == "g"
