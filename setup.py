@@ -31,7 +31,9 @@ setup(
     ],
     extras_require={
         "zoo": ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"],
-        "tests": ["pytest", "pytest-xdist", "pytest-timeout"],
+        # Gymnasium-Robotics point mazes: sb3-pola collect --env PointMaze_...
+        "maze": ["gymnasium-robotics>=1.4"],
+        "tests": ["pytest", "pytest-xdist", "pytest-timeout", "gymnasium-robotics>=1.4"],
         "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
     },
     entry_points={"console_scripts": ["sb3-pola=sb3_pola.cli:main"]},
