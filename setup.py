@@ -5,6 +5,9 @@ from setuptools import find_packages, setup
 with open(os.path.join("sb3_pola", "version.txt")) as file_handler:
     __version__ = file_handler.read().strip()
 
+# ONNX export (torch.onnx's exporter needs onnx and onnxscript) and ONNX Runtime to run the exported file
+EXPORT_REQUIRES = ["onnx>=1.16", "onnxscript>=0.3", "onnxruntime>=1.18"]
+
 long_description = open("README.md").read() if os.path.exists("README.md") else ""
 
 setup(
@@ -31,7 +34,8 @@ setup(
     ],
     extras_require={
         "zoo": ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"],
-        "tests": ["pytest", "pytest-xdist", "pytest-timeout"],
+        "export": EXPORT_REQUIRES,
+        "tests": ["pytest", "pytest-xdist", "pytest-timeout", *EXPORT_REQUIRES],
         "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
     },
     entry_points={"console_scripts": ["sb3-pola=sb3_pola.cli:main"]},
