@@ -188,6 +188,15 @@ def test_refuses_unknown_formats_and_overridden_predict(tiny_dataset, tmp_path: 
         custom.export_policy(tmp_path / "policy.pt", format="torchscript")
 
 
+def test_a_graph_that_disagrees_with_predict_is_not_written(tiny_dataset, tmp_path: pathlib.Path, monkeypatch):
+    model = POLA("MlpPolicy", dataset=tiny_dataset, device="cpu", policy_kwargs={"net_arch": [16]})
+    forward = DeterministicPolicyGraph.forward
+    monkeypatch.setattr(DeterministicPolicyGraph, "forward", lambda self, obs: forward(self, obs) + 1e-3)
+    with pytest.raises(PolicyExportError, match=r"differs from predict by [0-9.e-]+ \(> 1e-05\)"):
+        model.export_policy(tmp_path / "policy.pt", format="torchscript")
+    assert not (tmp_path / "policy.pt").exists()
+
+
 def test_refuses_unbounded_actions(tmp_path: pathlib.Path):
     policy = POLAPolicy(
         gym.spaces.Box(-np.inf, np.inf, (3,), np.float32),

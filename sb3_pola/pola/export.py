@@ -179,8 +179,9 @@ def export_policy(
 ) -> pathlib.Path:
     """Write ``policy``'s deterministic action as an ONNX or TorchScript file (see the module docstring).
 
-    Before writing, the graph is checked against ``policy``'s own deterministic predict on a batch of
-    observations drawn around the normalisation mean.
+    The graph is checked against ``policy``'s own deterministic predict on a batch of observations drawn
+    around the normalisation mean: before writing, and the written file too (TorchScript; ONNX where
+    ``onnxruntime`` is installed).
 
     :param policy: the policy (``model.policy``)
     :param path: output file
@@ -200,18 +201,37 @@ def export_policy(
     with th.no_grad():
         expected = _predict_actions(policy, example)
         got = graph(example)
-    error = float((got - expected).abs().max())
-    if not error <= atol:  # also catches NaN
-        raise PolicyExportError(
-            f"The export graph differs from predict by {error:.3g} (> {atol}); this policy is not exportable as is"
-        )
+    _check_close(got, expected, atol, "The export graph")
     if format == "torchscript":
         with th.no_grad():
             traced = th.jit.trace(graph, (example,), check_trace=False)
+            _check_close(traced(example), expected, atol, "The traced graph")
         th.jit.save(traced, str(path))
     else:
         _export_onnx(graph, example, path, opset_version)
+        try:
+            _check_onnx(path, example, expected, atol)
+        except PolicyExportError:
+            path.unlink()  # never leave a file that disagrees with predict
+            raise
     return path
+
+
+def _check_close(got: th.Tensor, expected: th.Tensor, atol: float, what: str) -> None:
+    error = float((got - expected).abs().max())
+    if not error <= atol:  # also catches NaN
+        raise PolicyExportError(f"{what} differs from predict by {error:.3g} (> {atol}); this policy is not exportable as is")
+
+
+def _check_onnx(path: pathlib.Path, example: th.Tensor, expected: th.Tensor, atol: float) -> None:
+    """The written file under ONNX Runtime against ``predict``, where ONNX Runtime is installed."""
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        return
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    actions = session.run(None, {INPUT_NAME: example.numpy()})[0]
+    _check_close(th.as_tensor(actions), expected, atol, f"{path} under ONNX Runtime")
 
 
 def _probe_observations(graph: DeterministicPolicyGraph, n: int) -> th.Tensor:
