@@ -5,6 +5,10 @@ from setuptools import find_packages, setup
 with open(os.path.join("sb3_pola", "version.txt")) as file_handler:
     __version__ = file_handler.read().strip()
 
+# ONNX export (torch.onnx's exporter needs onnx and onnxscript) and ONNX Runtime to run the exported file
+EXPORT_REQUIRES = ["onnx>=1.16", "onnxscript>=0.3", "onnxruntime>=1.18"]
+MAZE_REQUIRES = ["gymnasium-robotics>=1.4"]
+
 long_description = open("README.md").read() if os.path.exists("README.md") else ""
 
 setup(
@@ -32,8 +36,9 @@ setup(
     extras_require={
         "zoo": ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"],
         # Gymnasium-Robotics point mazes: sb3-pola collect --env PointMaze_...
-        "maze": ["gymnasium-robotics>=1.4"],
-        "tests": ["pytest", "pytest-xdist", "pytest-timeout", "gymnasium-robotics>=1.4"],
+        "maze": MAZE_REQUIRES,
+        "export": EXPORT_REQUIRES,
+        "tests": ["pytest", "pytest-xdist", "pytest-timeout", *MAZE_REQUIRES, *EXPORT_REQUIRES],
         "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
     },
     entry_points={"console_scripts": ["sb3-pola=sb3_pola.cli:main"]},

@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "peers": ("sb3_pola.experiments.peers", "d3rlpy baselines (TD3+BC, IQL, BC) for the score table"),
     "model-check": ("sb3_pola.experiments.model_check", "k-step error of the dynamics model under dataset and policy actions"),
     "datasets": ("sb3_pola.common.datasets", "list the Minari datasets found locally"),
+    "export": ("sb3_pola.pola.export", "export a saved model's deterministic policy to ONNX or TorchScript"),
 }
 
 

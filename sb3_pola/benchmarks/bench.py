@@ -2,6 +2,7 @@
 
 Sections: gradient steps per second over configurations with FLOPs and roofline fraction
 (:mod:`~sb3_pola.benchmarks.train_bench`), predict latency and throughput (:mod:`~sb3_pola.benchmarks.predict_bench`),
+the exported policy's latency under ONNX Runtime and TorchScript (:mod:`~sb3_pola.benchmarks.export_bench`, CPU),
 dataset load time and memory (:mod:`~sb3_pola.benchmarks.data_bench`) and the dynamics model's fit time
 (:mod:`~sb3_pola.benchmarks.dynamics_bench`). Timings are medians after warm-up. ``--quick`` runs a
 reduced set in under 2 minutes on 2 CPU cores. Runs unchanged on CUDA (``--device cuda``).
@@ -23,7 +24,7 @@ from typing import Any
 
 import torch as th
 
-SECTIONS = ("train", "predict", "data", "dynamics")
+SECTIONS = ("train", "predict", "export", "data", "dynamics")
 
 
 def machine_info(device: str) -> dict[str, Any]:
@@ -82,6 +83,17 @@ def _other_section(name: str, section: Any) -> list[str]:
     """A section the tables do not know (an error, an older layout) as a dotted key list."""
     lines = ["", f"{name} (from `sb3_pola.benchmarks.{name}_bench`):", ""]
     return lines + [f"- {key}: {value}" for key, value in _flatten(section)]
+
+
+def _export_table(export: Any) -> list[str]:
+    """Single-observation latency of the exported policy (``export_bench.run``'s result)."""
+    if export is None:
+        return []
+    if not isinstance(export, dict) or "configs" not in export:
+        return _other_section("export", export)
+    from sb3_pola.benchmarks.export_bench import format_table
+
+    return format_table(export)
 
 
 def _data_table(data: Any) -> list[str]:
@@ -229,6 +241,7 @@ def format_tables(results: dict[str, Any]) -> str:
             )
     elif pred is not None:
         lines += ["", f"predict: {pred}"]
+    lines += _export_table(results.get("export"))
     lines += _data_table(results.get("data"))
     lines += _dynamics_table(results.get("dynamics"))
     lines += ["", f"Total benchmark time: {results['total_s']:.0f} s"]
@@ -246,7 +259,7 @@ def run_section(name: str, quick: bool, device: str, policy_kwargs: dict[str, An
             from sb3_pola.benchmarks import predict_bench
 
             result = predict_bench.run(quick, device, policy_kwargs=policy_kwargs, compiled=compiled)
-        else:  # the data and dynamics benchmarks (their own modules, CPU/GPU as they choose)
+        else:  # the export, data and dynamics benchmarks (their own modules, CPU/GPU as they choose)
             module = importlib.import_module(f"sb3_pola.benchmarks.{name}_bench")
             result = module.run(quick)
     except Exception as error:  # one broken section must not lose the others

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import os
+import pathlib
 import warnings
 from collections.abc import Callable, Iterator
 from typing import Any, ClassVar, TypeVar
@@ -16,6 +18,7 @@ from torch.nn.utils import clip_grad_norm_
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.common.termination import TerminationFn, get_termination_fn
+from sb3_pola.pola.export import export_policy
 from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy
 
 SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
@@ -513,6 +516,23 @@ class POLA(OfflineAlgorithm):
                 q_loss = q_loss + self.lookahead_uncertainty_penalty * (weights * doubt).sum()
             stats.update({f"lookahead_uncertainty_{i + 1}": doubt[i].detach() for i in range(horizon)})
         return q_loss, stats
+
+    def export_policy(self, path: str | os.PathLike[str], format: str = "onnx", **kwargs: Any) -> pathlib.Path:
+        """Write the deterministic policy as one static graph that runs without sb3_pola (``sb3-pola export``).
+
+        The graph maps raw observations ``obs`` ``[batch, obs_dim]`` (float32) to the actions
+        ``predict(obs, deterministic=True)`` returns, ``action`` ``[batch, action_dim]``: normalisation, state
+        products, the noise-free reverse chain of the predict actor unrolled, the clip and the rescaling to
+        the action bounds (:mod:`sb3_pola.pola.export`).
+
+        :param path: output file
+        :param format: ``"onnx"`` (for ONNX Runtime; needs ``pip install sb3_pola[export]``) or
+            ``"torchscript"`` (for ``torch.jit.load``)
+        :param kwargs: arguments of :func:`~sb3_pola.pola.export.export_policy` (``opset_version``, ``atol``)
+        :raises ~sb3_pola.pola.export.PolicyExportError: the policy cannot be exported, e.g. ``n_action_samples > 1``
+        :return: the written file
+        """
+        return export_policy(self.policy, path, format=format, **kwargs)
 
     def _clip(self, parameters: Any) -> th.Tensor:
         if self.max_grad_norm is None:

@@ -1,0 +1,313 @@
+"""Export the deterministic policy as one static graph (ONNX or TorchScript) that runs without sb3_pola.
+
+The graph maps a batch of raw observations to the actions ``model.predict(obs, deterministic=True)``
+returns: the state normalisation, the pairwise state products, the noise-free reverse chain of the
+predict actor (EMA or online) unrolled over its fixed number of steps, the clip to ``[-1, 1]`` and the
+rescaling to the action space's bounds. Input ``obs`` ``[batch, obs_dim]`` (float32), output
+``action`` ``[batch, action_dim]``, with a dynamic batch dimension.
+
+``sb3-pola export MODEL.zip OUT [--format onnx|torchscript]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import logging
+import os
+import pathlib
+import warnings
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from torch import nn
+from torch.nn import functional as F
+
+from sb3_pola.common.activations import FusedMish
+from sb3_pola.common.torch_layers import StateProductsExtractor
+from sb3_pola.pola.policies import DiffusionActor, POLAPolicy
+
+EXPORT_FORMATS = ("onnx", "torchscript")
+INPUT_NAME = "obs"
+OUTPUT_NAME = "action"
+# suffixes that make ``sb3-pola export`` write TorchScript without ``--format``
+TORCHSCRIPT_SUFFIXES = (".pt", ".pth", ".ts", ".jit")
+
+
+class PolicyExportError(ValueError):
+    """The policy cannot be exported (a configuration the static graph cannot reproduce)."""
+
+
+class DeterministicPolicyGraph(nn.Module):
+    """``model.predict(obs, deterministic=True)`` as a plain module of static shapes: ``[B, obs] -> [B, A]``.
+
+    Holds copies of the weights it needs (the predict actor's noise predictor, the normalisation
+    statistics, the action bounds); the diffusion step's time embedding goes through the first layer
+    once here, so each unrolled step adds a constant bias. Built by :func:`export_policy`.
+
+    :param policy: the policy to reproduce (``n_action_samples=1``, finite action bounds)
+    """
+
+    obs_mean: th.Tensor
+    obs_std: th.Tensor
+    idx_i: th.Tensor
+    idx_j: th.Tensor
+    w_state: th.Tensor
+    w_action: th.Tensor
+    step_bias: th.Tensor
+    action_low: th.Tensor
+    action_high: th.Tensor
+
+    def __init__(self, policy: POLAPolicy) -> None:
+        super().__init__()
+        check_exportable(policy)
+        extractor = policy.features_extractor
+        assert isinstance(extractor, StateProductsExtractor)
+        actor = policy.actor_ema if policy.predict_actor == "ema" else policy.actor
+        a_dim, t_dim = actor.action_dim, actor.time_embedding_dim
+        with th.no_grad():
+            self.register_buffer("obs_mean", extractor.obs_mean.detach().cpu().float().clone())
+            self.register_buffer("obs_std", extractor.obs_std.detach().cpu().float().clone())
+            self.use_state_products = extractor.use_state_products
+            self.register_buffer("idx_i", extractor.idx_i.detach().cpu().clone())
+            self.register_buffer("idx_j", extractor.idx_j.detach().cpu().clone())
+            cpu_actor = copy.deepcopy(actor).cpu().float()
+            weight = cpu_actor.input_layer.weight.detach()  # [H, A + time + F]
+            self.register_buffer("w_action", weight[:, :a_dim].clone())  # [H, A]
+            self.register_buffer("w_state", weight[:, a_dim + t_dim :].clone())  # [H, F]
+            time_proj = F.linear(cpu_actor.time_mlp(cpu_actor.step_indices), weight[:, a_dim : a_dim + t_dim])  # [n, H]
+            self.register_buffer("step_bias", time_proj + cpu_actor.input_layer.bias.detach())  # [n, H]
+            layers = [_exportable_layer(m) for m in cpu_actor.trunk]
+            self.trunk = nn.Sequential(*layers).requires_grad_(False)
+            assert isinstance(policy.action_space, spaces.Box)
+            self.register_buffer("action_low", th.as_tensor(policy.action_space.low, dtype=th.float32).flatten())
+            self.register_buffer("action_high", th.as_tensor(policy.action_space.high, dtype=th.float32).flatten())
+        # (sqrt(1 / abar_t), sqrt(1 / abar_t - 1), posterior mean coefficients c1, c2) per step: Python floats,
+        # constants of the unrolled graph
+        self.step_coefs = [coefs[:4] for coefs in actor._step_coefs]
+        self.obs_dim = int(self.obs_mean.shape[0])
+        self.action_dim = a_dim
+        self.eval()
+
+    @property
+    def n_diffusion_steps(self) -> int:
+        return len(self.step_coefs)
+
+    def forward(self, obs: th.Tensor) -> th.Tensor:
+        x = (obs.float() - self.obs_mean) / self.obs_std  # [B, n]
+        if self.use_state_products:
+            x = th.cat((x, x[:, self.idx_i] * x[:, self.idx_j]), dim=-1)  # [B, n + n(n-1)/2]
+        state_proj = F.linear(x, self.w_state)  # [B, H]
+        action: th.Tensor | None = None  # a_T = 0: the noise-free chain's start contributes nothing
+        for t in reversed(range(self.n_diffusion_steps)):
+            h = state_proj + self.step_bias[t]
+            if action is not None:
+                h = h + F.linear(action, self.w_action)
+            eps = self.trunk(h)  # [B, A]
+            recip, recipm1, coef1, coef2 = self.step_coefs[t]
+            # DDPM posterior mean with the predicted x_0 clipped to the action bounds (eq. 5)
+            if action is None:
+                action = (eps * -recipm1).clamp(-1.0, 1.0) * coef1
+            else:
+                action = (action * recip - eps * recipm1).clamp(-1.0, 1.0) * coef1 + action * coef2
+        assert action is not None
+        action = action.clamp(-1.0, 1.0)
+        # SB3's unscale_action: [-1, 1] -> [low, high]
+        return self.action_low + 0.5 * (action + 1.0) * (self.action_high - self.action_low)
+
+
+def _exportable_layer(module: nn.Module) -> nn.Module:
+    """A trunk layer as a plain module: the compiled Mish (Python-side dispatch) becomes ``nn.Mish``."""
+    if isinstance(module, FusedMish):
+        return nn.Mish()
+    return copy.deepcopy(module)
+
+
+def check_exportable(policy: Any) -> None:
+    """Raise :class:`PolicyExportError` if the static graph cannot reproduce ``policy``'s deterministic predict.
+
+    :param policy: a :class:`~sb3_pola.pola.policies.POLAPolicy`
+    """
+    if not isinstance(policy, POLAPolicy):
+        raise PolicyExportError(f"export_policy needs a POLAPolicy, got {type(policy).__name__}")
+    # the graph reproduces these methods as written here; a subclass that overrides one may do anything
+    overridden = [
+        f"{cls.__name__}.{name}"
+        for obj, cls, names in (
+            (policy, POLAPolicy, ("_predict", "actor_features", "forward", "predict", "unscale_action")),
+            (policy.features_extractor, StateProductsExtractor, ("forward", "normalize")),
+            (policy.actor_ema if policy.predict_actor == "ema" else policy.actor, DiffusionActor, ("sample", "predict_noise")),
+        )
+        if isinstance(obj, cls)
+        for name in names
+        if getattr(type(obj), name) is not getattr(cls, name)
+    ]
+    if not isinstance(policy.features_extractor, StateProductsExtractor):
+        overridden.append(f"features extractor {type(policy.features_extractor).__name__}")
+    if overridden:
+        raise PolicyExportError(
+            f"Cannot export {type(policy).__name__}: it overrides {', '.join(overridden)}, which the exported graph "
+            "would not reproduce"
+        )
+    if policy.n_action_samples > 1:
+        raise PolicyExportError(
+            f"Cannot export a policy with n_action_samples={policy.n_action_samples}: its deterministic predict ranks "
+            "candidates drawn from a seeded generator whose noise depends on the batch size, which no static graph "
+            "reproduces. Set model.policy.n_action_samples = 1 to export the noise-free chain (a different policy)."
+        )
+    action_space = policy.action_space
+    assert isinstance(action_space, spaces.Box)
+    if not (np.all(np.isfinite(action_space.low)) and np.all(np.isfinite(action_space.high))):
+        raise PolicyExportError(
+            f"Cannot export a policy whose action space {action_space} has infinite bounds: predict rescales "
+            "actions from [-1, 1] to the bounds"
+        )
+
+
+def _infer_format(path: str | os.PathLike[str]) -> str:
+    return "torchscript" if pathlib.Path(path).suffix.lower() in TORCHSCRIPT_SUFFIXES else "onnx"
+
+
+def export_policy(
+    policy: POLAPolicy,
+    path: str | os.PathLike[str],
+    format: str = "onnx",
+    opset_version: int | None = None,
+    atol: float = 1e-5,
+) -> pathlib.Path:
+    """Write ``policy``'s deterministic action as an ONNX or TorchScript file (see the module docstring).
+
+    The graph is checked against ``policy``'s own deterministic predict on a batch of observations drawn
+    around the normalisation mean: before writing, and the written file too (TorchScript; ONNX where
+    ``onnxruntime`` is installed).
+
+    :param policy: the policy (``model.policy``)
+    :param path: output file
+    :param format: ``"onnx"`` (needs ``onnx`` and ``onnxscript``: ``pip install sb3_pola[export]``) or
+        ``"torchscript"`` (a traced module for ``torch.jit.load``)
+    :param opset_version: ONNX opset (``None``: the exporter's default)
+    :param atol: largest absolute difference to ``predict`` tolerated by the check
+    :raises PolicyExportError: the policy cannot be exported
+    :return: the written file
+    """
+    if format not in EXPORT_FORMATS:
+        raise ValueError(f"format must be one of {EXPORT_FORMATS}, got {format!r}")
+    graph = DeterministicPolicyGraph(policy)
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    example = _probe_observations(graph, 8)
+    with th.no_grad():
+        expected = _predict_actions(policy, example)
+        got = graph(example)
+    _check_close(got, expected, atol, "The export graph")
+    if format == "torchscript":
+        with th.no_grad():
+            traced = th.jit.trace(graph, (example,), check_trace=False)
+            _check_close(traced(example), expected, atol, "The traced graph")
+        th.jit.save(traced, str(path))
+    else:
+        _export_onnx(graph, example, path, opset_version)
+        try:
+            _check_onnx(path, example, expected, atol)
+        except PolicyExportError:
+            path.unlink()  # never leave a file that disagrees with predict
+            raise
+    return path
+
+
+def _check_close(got: th.Tensor, expected: th.Tensor, atol: float, what: str) -> None:
+    error = float((got - expected).abs().max())
+    if not error <= atol:  # also catches NaN
+        raise PolicyExportError(f"{what} differs from predict by {error:.3g} (> {atol}); this policy is not exportable as is")
+
+
+def _check_onnx(path: pathlib.Path, example: th.Tensor, expected: th.Tensor, atol: float) -> None:
+    """The written file under ONNX Runtime against ``predict``, where ONNX Runtime is installed."""
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        return
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    actions = session.run(None, {INPUT_NAME: example.numpy()})[0]
+    _check_close(th.as_tensor(actions), expected, atol, f"{path} under ONNX Runtime")
+
+
+def _probe_observations(graph: DeterministicPolicyGraph, n: int) -> th.Tensor:
+    """``[n, obs]`` observations around the data's mean (a fixed seed: the export is reproducible)."""
+    generator = th.Generator().manual_seed(0)
+    return graph.obs_mean + graph.obs_std * th.randn(n, graph.obs_dim, generator=generator)
+
+
+def _predict_actions(policy: POLAPolicy, obs: th.Tensor) -> th.Tensor:
+    """``policy.predict(obs, deterministic=True)`` as a float32 tensor (SB3's unscale in numpy, float32)."""
+    actions = policy._predict(obs.to(policy.device), deterministic=True).cpu().numpy()
+    return th.as_tensor(policy.unscale_action(actions))
+
+
+def _export_onnx(graph: DeterministicPolicyGraph, example: th.Tensor, path: pathlib.Path, opset_version: int | None) -> None:
+    try:
+        import onnx  # noqa: F401
+        import onnxscript  # noqa: F401
+    except ImportError as error:
+        raise ImportError(
+            f"ONNX export needs the onnx and onnxscript packages ({error}): pip install 'sb3_pola[export]'"
+        ) from error
+    batch = th.export.Dim("batch")
+    registry_logger = logging.getLogger("torch.onnx._internal.exporter._registration")
+    level = registry_logger.level
+    # the exporter's own noise: one warning per missing torchvision op, and a pytree deprecation inside torch
+    registry_logger.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*LeafSpec.*", category=FutureWarning)
+            program = th.onnx.export(
+                graph,
+                (example,),
+                input_names=[INPUT_NAME],
+                output_names=[OUTPUT_NAME],
+                dynamic_shapes={INPUT_NAME: {0: batch}},
+                opset_version=opset_version,
+                dynamo=True,
+                external_data=False,
+                verbose=False,
+            )
+    finally:
+        registry_logger.setLevel(level)
+    assert program is not None
+    program.save(str(path), external_data=False)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="sb3-pola export", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("model", help="a saved POLA model (.zip)")
+    parser.add_argument("out", help="output file")
+    parser.add_argument(
+        "--format",
+        choices=EXPORT_FORMATS,
+        default=None,
+        help=f"default: torchscript if OUT ends in {', '.join(TORCHSCRIPT_SUFFIXES)}, else onnx",
+    )
+    args = parser.parse_args(argv)
+    from sb3_pola.pola.pola import POLA
+
+    model = POLA.load(args.model, device="cpu")
+    fmt = args.format or _infer_format(args.out)
+    try:
+        out = model.export_policy(args.out, format=fmt)
+    except PolicyExportError as error:
+        parser.exit(1, f"sb3-pola export: {error}\n")
+    policy = model.policy
+    print(
+        f"wrote {out} ({fmt}): {INPUT_NAME} [batch, {policy.observation_space.shape[0]}] float32 -> "  # type: ignore[index]
+        f"{OUTPUT_NAME} [batch, {policy.action_space.shape[0]}], {policy.predict_actor} actor, "  # type: ignore[index]
+        f"{policy.n_diffusion_steps} denoising steps"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
