@@ -166,3 +166,15 @@ def test_make_env_prefers_the_eval_env_spec(tmp_path: pathlib.Path) -> None:
     metadata_file.write_text(json.dumps(metadata))
     assert make_env(str(path)).spec.max_episode_steps == 77
     assert make_env(str(path), eval_env=False).spec.max_episode_steps == spec["max_episode_steps"]
+
+
+def test_export_takes_the_flattened_vector(goal_model: POLA, tmp_path: pathlib.Path) -> None:
+    import torch as th
+
+    path = goal_model.export_policy(tmp_path / "goal.pt", format="torchscript")
+    graph = th.jit.load(str(path))
+    obs, _ = gym.make("GoalPendulum-v0").reset(seed=7)
+    flat = gym.spaces.flatten(goal_model.dict_observation_space, obs).astype(np.float32)
+    with th.no_grad():
+        exported = graph(th.as_tensor(flat)[None])[0].numpy()
+    np.testing.assert_allclose(exported, goal_model.predict(obs, deterministic=True)[0], atol=1e-5)
