@@ -16,7 +16,7 @@ from sb3_pola.experiments import ray_grid, score
 
 DATASETS = ["test/pendulum-v0", "test/pendulum2-v0"]
 VARIANTS = ["T0", "T1"]
-TINY = ["--steps", "40", "--eval-freq", "20", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
+TINY = ["--steps", "20", "--eval-freq", "10", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
 TINY += ["--n-critics", "2", "--dynamics-steps", "4"]
 TINY += ["--dynamics-kwargs", '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}']
 TINY += ["--preset", "cpu", "--no-compile", "--device", "cpu", "--threads", "1", "-v", "0"]
@@ -106,16 +106,16 @@ def test_ray_grid_equals_sequential_and_recovers(
     sequential, distributed = tmp_path / "sequential", tmp_path / "ray"
     assert score.main([*TINY, "--data-dir", str(data_root), "--out", str(sequential)]) == 0
     expected = score.read_rows(sequential / "scores.csv")
-    assert len(expected) == 8  # 2 datasets x 2 variants x evaluations at steps 20 and 40
+    assert len(expected) == 8  # 2 datasets x 2 variants x evaluations at steps 10 and 20
 
     # one worker dies after the cell's first evaluation, another cell raises: the other two cells finish
     killed, broken = (score.cell_name(d, "T1", 0) for d in DATASETS)
-    local_ray.write_text(json.dumps({killed: {"step": 40, "action": "kill"}, broken: {"step": 20, "action": "raise"}}))
+    local_ray.write_text(json.dumps({killed: {"step": 20, "action": "kill"}, broken: {"step": 10, "action": "raise"}}))
     command = [*TINY, "--data-dir", str(data_root), "--out", str(distributed), "--ray", "--max-retries", "0"]
     capsys.readouterr()
     assert score.main(command) == 1
     err = capsys.readouterr().err
-    assert f"{broken} failed" in err and "injected failure at step 20" in err
+    assert f"{broken} failed" in err and "injected failure at step 10" in err
     assert f"{killed} failed" in err
     finished = {p.stem for p in (distributed / "cells").glob("*.json")}
     assert finished == {score.cell_name(d, "T0", 0) for d in DATASETS}
@@ -123,7 +123,7 @@ def test_ray_grid_equals_sequential_and_recovers(
         f"{score.slug(d)}__shared.pt" for d in DATASETS
     ]  # fitted once per dataset
     rows = score.read_rows(distributed / "scores.csv")
-    assert [r["step"] for r in rows if score.cell_name(r["dataset"], r["variant"], r["seed"]) == killed] == [20]
+    assert [r["step"] for r in rows if score.cell_name(r["dataset"], r["variant"], r["seed"]) == killed] == [10]
     assert (distributed / "ckpt" / f"{killed}.zip").exists()
 
     # the same command again: finished cells skipped, the killed one continues from its checkpoint
@@ -132,7 +132,7 @@ def test_ray_grid_equals_sequential_and_recovers(
     assert len(list((distributed / "cells").glob("*.json"))) == 4
     assert comparable(score.read_rows(distributed / "scores.csv")) == comparable(expected)
     assert "| test/pendulum2-v0 | T1 |" in (distributed / "table.md").read_text()
-    assert (distributed / "fig_rollout_test_pendulum-v0.png").exists() is (sequential / "fig_rollout_test_pendulum-v0.png").exists()
+    assert (distributed / "fig_rollout_test_pendulum2-v0.png").exists()
     assert sorted(p.name for p in (distributed / "models").iterdir()) == sorted(p.name for p in (sequential / "models").iterdir())
     assert not list((distributed / "ckpt").glob("*.zip"))
 

@@ -7,8 +7,8 @@ step with a checkpoint, then every cell sharing the model starts, that one conti
 On CPU the scores are therefore those of the sequential run.
 
 Each cell writes its evaluation rows to ``rows/<cell>.csv``; the driver merges them into ``scores.csv``
-(in the sequential run's order) while the grid runs, and writes ``table.md``, the figures and the
-diagnostics as cells finish. The same command resumes: finished cells are skipped and an interrupted cell
+(in the sequential run's order) while the grid runs, and rewrites ``table.md``, the figures and the
+diagnostics every few minutes and at the end. The same command resumes: finished cells are skipped and an interrupted cell
 continues from its checkpoint. A cell whose worker dies is retried (``--max-retries``); a failing cell is
 reported with its error while the others go on, and the exit code is then 1.
 """
@@ -27,8 +27,10 @@ from sb3_pola.experiments import score
 from sb3_pola.experiments.diagnostics import write_diagnostics
 
 MISSING_RAY = "sb3-pola score --ray needs Ray, an optional extra: pip install 'sb3-pola[ray]'"
-# seconds between two merges of the cells' rows into scores.csv
+# seconds between two merges of the cells' rows into scores.csv, and between two rewrites of the reports (the
+# figures take seconds: not after every one of a large grid's cells)
 MERGE_INTERVAL = 10.0
+REPORT_INTERVAL = 120.0
 
 Cell = tuple[str, str, int]
 
@@ -195,36 +197,36 @@ def run_grid(
         remote = ray.remote(cell_task)
         resources = dict(num_cpus=args.cpus_per_cell, num_gpus=args.gpus_per_cell, max_retries=args.max_retries)
         common = (asdict(config), str(out.resolve()), device, threads, args.verbose)
-        pending: dict[Any, tuple[str, bool]] = {}
+        pending: dict[Any, str] = {}
         fits: dict[pathlib.Path, Any] = {}
         for path, cell in plan_dynamics_fits(todo, config, out).items():
             name = f"{score.cell_name(*cell)} (dynamics fit)"
             fits[path] = remote.options(name=name, **resources).remote(cell, *common, True, environ)
-            pending[fits[path]] = (name, False)
+            pending[fits[path]] = name
         for cell in todo:
             name = score.cell_name(*cell)
             fit = fits.get(score.dynamics_path(out, cell[0], cell[2], config))
             after = [fit] if fit is not None and score.needs_dynamics(cell[1], config) else []
-            pending[remote.options(name=name, **resources).remote(cell, *common, False, environ, *after)] = (name, True)
+            pending[remote.options(name=name, **resources).remote(cell, *common, False, environ, *after)] = name
         print(f"[score] {len(todo)} cells on Ray ({ray.cluster_resources().get('CPU', 0):.0f} CPUs), {len(fits)} dynamics fits")
-        last_merge = time.monotonic()
+        last_merge = last_report = time.monotonic()
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1, timeout=MERGE_INTERVAL)
             for ref in done:
-                name, is_cell = pending.pop(ref)
+                name = pending.pop(ref)
                 try:
                     ray.get(ref)
                 except Exception as error:  # the cell's exception, or a worker lost more often than retried
                     failures.append((name, error))
                     print(f"[score] {name} failed:\n{_error_text(error)}", file=sys.stderr)
-                    continue
-                if is_cell:
-                    collect_rows(out, cells)
-                    score.write_reports(out, args.variants, info)
-                    write_diagnostics(out)
-            if time.monotonic() - last_merge >= MERGE_INTERVAL:
+            now = time.monotonic()
+            if now - last_merge >= MERGE_INTERVAL or done:
                 collect_rows(out, cells)
-                last_merge = time.monotonic()
+                last_merge = now
+            if now - last_report >= REPORT_INTERVAL and pending:
+                score.write_reports(out, args.variants, info)
+                write_diagnostics(out)
+                last_report = now
     finally:
         if started:
             ray.shutdown()
