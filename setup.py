@@ -31,7 +31,9 @@ setup(
     ],
     extras_require={
         "zoo": ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"],
-        "tests": ["pytest", "pytest-xdist", "pytest-timeout"],
+        # sb3-pola score --ray (plain ray; "ray[default]" adds the dashboard)
+        "ray": ["ray>=2.10"],
+        "tests": ["pytest", "pytest-xdist", "pytest-timeout", "ray>=2.10"],
         "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
     },
     entry_points={"console_scripts": ["sb3-pola=sb3_pola.cli:main"]},

@@ -139,7 +139,7 @@ def cell_task(
     path = rows_path(folder, cell)
     path.parent.mkdir(parents=True, exist_ok=True)
     return score.run_cell(
-        *cell, score.Config(**config), folder, device, verbose, csv_path=path, stop_after_dynamics=stop_after_dynamics
+        *cell, score.Config(**config), folder, device, verbose, rows_csv=path, stop_after_dynamics=stop_after_dynamics
     )
 
 
@@ -208,7 +208,8 @@ def run_grid(
             fit = fits.get(score.dynamics_path(out, cell[0], cell[2], config))
             after = [fit] if fit is not None and score.needs_dynamics(cell[1], config) else []
             pending[remote.options(name=name, **resources).remote(cell, *common, False, environ, *after)] = name
-        print(f"[score] {len(todo)} cells on Ray ({ray.cluster_resources().get('CPU', 0):.0f} CPUs), {len(fits)} dynamics fits")
+        cpus = ray.cluster_resources().get("CPU", 0)
+        print(f"[score] {len(todo)} cells on Ray ({cpus:.0f} CPUs), {len(fits)} dynamics fits")
         last_merge = last_report = time.monotonic()
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1, timeout=MERGE_INTERVAL)

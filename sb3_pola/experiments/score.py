@@ -371,7 +371,7 @@ def run_cell(
     out: pathlib.Path,
     device: str,
     verbose: int = 1,
-    csv_path: pathlib.Path | None = None,
+    rows_csv: pathlib.Path | None = None,
     stop_after_dynamics: bool = False,
 ) -> bool:
     """Train and evaluate one (dataset, variant, seed) cell, resuming from its checkpoint if there is one.
@@ -386,7 +386,7 @@ def run_cell(
     :param out: output folder
     :param device: torch device
     :param verbose: 0 silent, 1 a line per evaluation
-    :param csv_path: where this cell's evaluation rows go (``out/scores.csv`` if ``None``)
+    :param rows_csv: where this cell's evaluation rows go (``out/scores.csv`` if ``None``)
     :param stop_after_dynamics: stop (with a checkpoint) after the first gradient step once the dynamics model
         is fitted and saved, so that other cells can share it while this one continues later
     :return: whether the cell finished (its marker is written)
@@ -399,7 +399,7 @@ def run_cell(
 
     _, kwargs, policy_kwargs = VARIANTS[variant]
     name = cell_name(dataset, variant, seed)
-    csv_path, ckpt = csv_path or out / "scores.csv", out / "ckpt" / f"{name}.zip"
+    csv_path, ckpt = rows_csv or out / "scores.csv", out / "ckpt" / f"{name}.zip"
     ckpt.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temp_files(ckpt)
     dyn_path = dynamics_path(out, dataset, seed, config)
@@ -407,7 +407,7 @@ def run_cell(
     previous_wall = 0.0
     rows = [r for r in read_rows(csv_path) if (r["dataset"], r["variant"], r["seed"]) == (dataset, variant, seed)]
     if ckpt.exists():
-        model = load_checkpoint(POLA, ckpt, dataset=dataset, device=device)
+        model = cast(POLA, load_checkpoint(POLA, ckpt, dataset=dataset, device=device))
         done_steps = model.num_timesteps
         if rows:
             previous_wall = max((r["wall_s"] for r in rows if r["step"] <= done_steps), default=0.0)
