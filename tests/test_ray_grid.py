@@ -164,6 +164,11 @@ def test_missing_ray_says_which_extra(
     assert not (tmp_path / "out" / "scores.csv").exists()
 
 
+def test_out_must_be_a_folder(capsys: pytest.CaptureFixture) -> None:
+    assert score.main(["--out", "s3://bucket/score", "--ray"]) == 2
+    assert "a folder path is needed" in capsys.readouterr().err
+
+
 def test_dynamics_fits_follow_the_sequential_order(tmp_path: pathlib.Path) -> None:
     cells = [(d, v, s) for s in (0, 1) for d in DATASETS for v in ("T0", "BC", "T3", "T1")]
     config = score.build_config(score.parse_args(["--preset", "cpu"]), "cpu")

@@ -20,7 +20,8 @@ dataset's env (D4RL-normalised score from the dataset's reference scores). Outpu
 candidates ranked by the critic, as Diffusion-QL evaluates) and writes ``reeval.csv`` and ``reeval.md``.
 
 An interrupted run is resumed by the same command: finished cells are skipped, a running cell
-continues from its last checkpoint. Presets: ``cpu`` (light networks, a few thousand steps),
+continues from its last checkpoint. ``--ray [ADDRESS]`` runs the cells as Ray tasks, on this machine or a
+cluster (:mod:`sb3_pola.experiments.ray_grid`). Presets: ``cpu`` (light networks, a few thousand steps),
 ``paper`` (the paper's configuration, for a CUDA GPU), ``auto`` (``paper`` on CUDA, else ``cpu``).
 Any preset value can be overridden from the command line.
 """
@@ -864,6 +865,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     """``sb3-pola score``; returns the exit code."""
     args = parse_args(argv)
+    if "://" in args.out:
+        print(f"[score] --out {args.out}: a folder path is needed (with --ray, one every worker sees)", file=sys.stderr)
+        return 2
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.data_dir:
