@@ -79,7 +79,11 @@ def collect_rows(out: pathlib.Path, cells: list[Cell]) -> list[dict[str, Any]]:
     others = sorted(p for p in folder.glob("*.csv") if p not in listed) if folder.is_dir() else []
     by_cell: dict[Cell, list[dict[str, Any]]] = {}
     for path in [*files.values(), *others]:
-        for row in score.read_rows(path):
+        try:
+            rows = score.read_rows(path)
+        except (ValueError, KeyError, TypeError):  # a row being written right now (the next merge reads it whole)
+            continue
+        for row in rows:
             by_cell.setdefault(_key(row), []).append(row)
     merged = [r for r in score.read_rows(out / "scores.csv") if _key(r) not in by_cell]
     for rows in by_cell.values():
