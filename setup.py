@@ -31,9 +31,11 @@ setup(
     ],
     extras_require={
         "zoo": ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"],
+        # Gymnasium-Robotics point mazes: sb3-pola collect --env PointMaze_...
+        "maze": ["gymnasium-robotics>=1.4"],
         # sb3-pola score --ray (plain ray; "ray[default]" adds the dashboard)
         "ray": ["ray>=2.10"],
-        "tests": ["pytest", "pytest-xdist", "pytest-timeout", "ray>=2.10"],
+        "tests": ["pytest", "pytest-xdist", "pytest-timeout", "gymnasium-robotics>=1.4", "ray>=2.10"],
         "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
     },
     entry_points={"console_scripts": ["sb3-pola=sb3_pola.cli:main"]},

@@ -14,6 +14,9 @@ mean return over ``--ref-episodes`` (>= 10) episodes. Written with
 ``minari.create_dataset_from_buffers`` (``DataCollector`` needs jax) under ``--out`` or
 ``$MINARI_DATASETS_PATH`` as ``<envname>/<kind>-v<version>``.
 
+Gymnasium-Robotics point mazes (``--env PointMaze_UMaze-v3`` etc.) have their own kinds and
+options: :mod:`sb3_pola.collect_maze` (``sb3-pola collect --env PointMaze_UMaze-v3 --help``).
+
 Example::
 
     sb3-pola collect --env InvertedPendulum-v5 --kind medium medium-replay --steps 30000 \\
@@ -39,11 +42,13 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 
 KINDS = ("random", "medium", "expert", "medium-replay", "medium-expert")
 MIN_REF_EPISODES = 10
 
-PolicyFn = Callable[[np.ndarray], np.ndarray]
+# observation (an array, or a dict of arrays for Dict spaces) -> action in env units
+PolicyFn = Callable[[Any], np.ndarray]
 
 
 @dataclass
@@ -78,6 +83,13 @@ def _env_var(name: str, value: str) -> Iterator[None]:
 def default_name(env_id: str) -> str:
     """``InvertedPendulum-v5`` -> ``invertedpendulum``."""
     return env_id.split("/")[-1].rsplit("-v", 1)[0].lower()
+
+
+def _stack(observations: list[Any]) -> Any:
+    """Stack per-step observations; Dict ones key by key, the layout Minari's episode buffers take."""
+    if isinstance(observations[0], dict):
+        return {key: _stack([obs[key] for obs in observations]) for key in observations[0]}
+    return np.asarray(observations)
 
 
 def rollout(
@@ -115,7 +127,7 @@ def rollout(
                 episodes.append(
                     EpisodeBuffer(
                         id=len(episodes),
-                        observations=np.asarray(ep_obs),
+                        observations=_stack(ep_obs),
                         actions=np.asarray(ep_act),
                         rewards=np.asarray(ep_rew),
                         terminations=np.asarray(ep_term),
@@ -128,20 +140,27 @@ def rollout(
     return episodes
 
 
-def evaluate(env: gym.Env, policy: PolicyFn | None, n_episodes: int, seed: int) -> list[float]:
-    """Undiscounted returns of ``n_episodes`` full episodes."""
+def run_episodes(env: gym.Env, policy: PolicyFn | None, n_episodes: int, seed: int) -> tuple[list[float], list[bool]]:
+    """Undiscounted returns of ``n_episodes`` full episodes, and whether each had a step with ``info["success"]``."""
     env.action_space.seed(seed)
-    returns = []
+    returns, successes = [], []
     for episode in range(n_episodes):
         obs, _ = env.reset(seed=seed + episode)
-        done, total = False, 0.0
+        done, total, success = False, 0.0, False
         while not done:
             action = env.action_space.sample() if policy is None else policy(obs)
-            obs, reward, terminated, truncated, _ = env.step(action)
+            obs, reward, terminated, truncated, info = env.step(action)
             total += float(reward)
+            success = success or bool(info.get("success", False))
             done = terminated or truncated
         returns.append(total)
-    return returns
+        successes.append(success)
+    return returns, successes
+
+
+def evaluate(env: gym.Env, policy: PolicyFn | None, n_episodes: int, seed: int) -> list[float]:
+    """Undiscounted returns of ``n_episodes`` full episodes."""
+    return run_episodes(env, policy, n_episodes, seed)[0]
 
 
 def policy_fn(model: Any, deterministic: bool) -> PolicyFn:
@@ -282,8 +301,8 @@ def replay_episodes(model: Any, end: int) -> list[Any]:
     return episodes
 
 
-def _repack(data_dir: pathlib.Path) -> None:
-    """Rewrite minari's HDF5 file with contiguous datasets.
+def _repack(data_dir: pathlib.Path, extra_metadata: dict[str, Any] | None = None) -> None:
+    """Rewrite minari's HDF5 file with contiguous datasets (and add ``extra_metadata`` to its metadata).
 
     Minari writes every episode's arrays as resizable chunked datasets, ~14 kB of overhead per
     episode; contiguous ones need ~2 kB, which keeps short-episode datasets (random,
@@ -307,6 +326,7 @@ def _repack(data_dir: pathlib.Path) -> None:
     os.replace(tmp, src)
     metadata_file = data_dir / "metadata.json"
     metadata = json.loads(metadata_file.read_text())
+    metadata.update(extra_metadata or {})
     metadata["dataset_size"] = round(src.stat().st_size / 1e6, 1)  # MB, as minari computes it
     metadata_file.write_text(json.dumps(metadata))
 
@@ -315,15 +335,24 @@ def write_dataset(
     out_root: pathlib.Path,
     dataset_id: str,
     episodes: list[Any],
-    env_id: str,
+    env_id: str | EnvSpec,
     ref_min: float,
     ref_max: float,
     ref_episodes: int,
     algorithm_name: str,
     description: str,
     overwrite: bool,
+    eval_env: str | EnvSpec | None = None,
+    extra_metadata: dict[str, Any] | None = None,
+    code_permalink: str = "sb3_pola/collect.py",
 ) -> pathlib.Path:
-    """Create the Minari dataset in a temporary root, then move it in place (no half-written dataset)."""
+    """Create the Minari dataset in a temporary root, then move it in place (no half-written dataset).
+
+    :param env_id: the env the data was recorded in (id or spec: its ``env_spec``)
+    :param eval_env: the env to evaluate in (its ``eval_env_spec``); default ``env_id``
+    :param extra_metadata: more keys for ``metadata.json``
+    :param code_permalink: the code that made the data
+    """
     import minari
 
     target = out_root / dataset_id
@@ -337,18 +366,18 @@ def write_dataset(
             dataset_id=dataset_id,
             buffer=episodes,
             env=env_id,
-            eval_env=env_id,
+            eval_env=env_id if eval_env is None else eval_env,
             algorithm_name=algorithm_name,
             author="sb3-pola collect",
             author_email="none@example.org",
-            code_permalink="sb3_pola/collect.py",
+            code_permalink=code_permalink,
             ref_min_score=ref_min,
             ref_max_score=ref_max,
             num_episodes_average_score=ref_episodes,
             description=description,
             data_format="hdf5",
         )
-        _repack(pathlib.Path(tmp) / dataset_id / "data")
+        _repack(pathlib.Path(tmp) / dataset_id / "data", extra_metadata)
         target.parent.mkdir(parents=True, exist_ok=True)
         os.replace(pathlib.Path(tmp) / dataset_id, target)
         if "/" in dataset_id:  # minari's namespace file, which `minari list local` expects
@@ -359,9 +388,30 @@ def write_dataset(
     return target
 
 
+def dataset_summary(path: pathlib.Path, episodes: list[Any]) -> dict[str, Any]:
+    """Path, steps, episodes, mean return and size on disk of a written dataset, for the printed summary."""
+    returns = [float(np.sum(e.rewards)) for e in episodes]
+    return {
+        "path": str(path),
+        "steps": int(sum(len(e.rewards) for e in episodes)),
+        "episodes": len(episodes),
+        "mean_return": float(np.mean(returns)),
+        "bytes": sum(p.stat().st_size for p in path.rglob("*") if p.is_file()),
+    }
+
+
+def datasets_root(out: str | None) -> pathlib.Path:
+    """``--out``, else ``$MINARI_DATASETS_PATH``, else ``~/.minari/datasets``, as an absolute path."""
+    root = pathlib.Path(out or os.environ.get("MINARI_DATASETS_PATH") or pathlib.Path.home() / ".minari" / "datasets")
+    return root.expanduser().resolve()  # minari mangles relative dataset paths (get_size joins them twice)
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="sb3-pola collect", description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="sb3-pola collect",
+        description=__doc__.split("\n\n")[0],
+        epilog="Point mazes have their own kinds and options: sb3-pola collect --env PointMaze_UMaze-v3 --help",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--env", required=True, help="Gymnasium env id with continuous actions, e.g. InvertedPendulum-v5")
     parser.add_argument("--kind", nargs="+", choices=KINDS, default=["medium"], help="dataset kind(s) to make")
@@ -391,7 +441,14 @@ def make_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``sb3-pola collect`` / ``python -m sb3_pola.collect``."""
+    """Entry point of ``sb3-pola collect`` / ``python -m sb3_pola.collect`` (point mazes: :mod:`sb3_pola.collect_maze`)."""
+    from sb3_pola import collect_maze
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    peek = argparse.ArgumentParser(add_help=False)
+    peek.add_argument("--env")
+    if collect_maze.is_maze_env(peek.parse_known_args(argv)[0].env):
+        return collect_maze.main(argv)
     args = make_parser().parse_args(argv)
     if args.ref_episodes < MIN_REF_EPISODES:
         print(f"--ref-episodes must be >= {MIN_REF_EPISODES}", file=sys.stderr)
@@ -400,11 +457,7 @@ def main(argv: list[str] | None = None) -> int:
     if not isinstance(env.action_space, gym.spaces.Box):
         print(f"{args.env} has action space {env.action_space}: continuous (Box) actions are needed", file=sys.stderr)
         return 2
-    out_root = (
-        pathlib.Path(args.out or os.environ.get("MINARI_DATASETS_PATH") or pathlib.Path.home() / ".minari" / "datasets")
-        .expanduser()
-        .resolve()
-    )  # minari mangles relative dataset paths (get_size joins them twice)
+    out_root = datasets_root(args.out)
     name = args.name or default_name(args.env)
     kinds = list(dict.fromkeys(args.kind))
     progress = not args.no_progress
@@ -511,15 +564,7 @@ def main(argv: list[str] | None = None) -> int:
             description,
             args.overwrite,
         )
-        returns = [float(np.sum(e.rewards)) for e in episodes]
-        size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
-        summary["datasets"][dataset_id] = {
-            "path": str(path),
-            "steps": int(sum(len(e.rewards) for e in episodes)),
-            "episodes": len(episodes),
-            "mean_return": float(np.mean(returns)),
-            "bytes": size,
-        }
+        summary["datasets"][dataset_id] = dataset_summary(path, episodes)
     summary["seconds"] = round(time.perf_counter() - start_time, 1)
     print(json.dumps(summary, indent=2))
     return 0

@@ -11,6 +11,41 @@ import gymnasium as gym
 import numpy as np
 
 
+class GoalPendulum(gym.Env):
+    """Pendulum-v1 with goal-style Dict observations (``observation``, ``achieved_goal``, ``desired_goal``), as
+    Minari's maze datasets have, for the Dict-observation tests (registered below as ``GoalPendulum-v0``)."""
+
+    def __init__(self) -> None:
+        self.pendulum = gym.make("Pendulum-v1").unwrapped
+        box = gym.spaces.Box(-np.inf, np.inf, shape=(1,), dtype=np.float32)
+        self.observation_space = gym.spaces.Dict(
+            {"observation": self.pendulum.observation_space, "achieved_goal": box, "desired_goal": box}
+        )
+        self.action_space = self.pendulum.action_space
+
+    def _dict(self, obs: np.ndarray) -> dict:
+        return {"observation": obs, "achieved_goal": obs[:1].copy(), "desired_goal": np.ones(1, dtype=np.float32)}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        super().reset(seed=seed)
+        obs, info = self.pendulum.reset(seed=seed)
+        return self._dict(obs), info
+
+    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        obs, reward, terminated, truncated, info = self.pendulum.step(action)
+        return self._dict(obs), float(reward), terminated, truncated, info
+
+
+if "GoalPendulum-v0" not in gym.registry:
+    gym.register("GoalPendulum-v0", entry_point="pola_data:GoalPendulum", max_episode_steps=200)
+
+
+def _stack(observations: list) -> np.ndarray | dict:
+    if isinstance(observations[0], dict):
+        return {key: np.array([o[key] for o in observations]) for key in observations[0]}
+    return np.array(observations)
+
+
 def record_random_dataset(
     root: pathlib.Path,
     dataset_id: str,
@@ -48,7 +83,7 @@ def record_random_dataset(
         buffers.append(
             EpisodeBuffer(
                 id=episode,
-                observations=np.array(observations),
+                observations=_stack(observations),
                 actions=np.array(actions),
                 rewards=np.array(rewards),
                 terminations=np.array(terms),

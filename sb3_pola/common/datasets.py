@@ -4,6 +4,9 @@
 ``minari.MinariDataset`` and returns an :class:`OfflineDataset`. Transitions are built from each
 episode's own observations (``next_obs[t] = obs[t + 1]`` of the same episode), ``dones`` are
 terminations only (a time-limit truncation is not terminal) and actions are rescaled to [-1, 1].
+Dict observations (``Dict`` of ``Box``) are flattened in the space's key order (see
+:mod:`sb3_pola.common.dict_obs`); the dataset keeps the original space, and ``make_env`` flattens the
+env's observations the same way.
 
 Reading a Minari dataset costs ~2 ms per episode, so the concatenated arrays are cached on disk
 (one folder of ``.npy`` files per dataset, keyed by the dataset id, its size and a fingerprint of its files and
@@ -28,6 +31,8 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+from sb3_pola.common.dict_obs import check_dict_space, flat_space, flatten_env, flatten_episode_observations
 
 # Bump when the cached arrays change meaning: old caches are then never read.
 CACHE_VERSION = 2
@@ -98,7 +103,7 @@ class OfflineDataset:
     :param rewards: ``[N]`` float32
     :param next_observations: ``[N, obs_dim]`` float32, next observation of the same episode
     :param dones: ``[N]`` float32, 1 on terminations only (truncations are not terminal)
-    :param observation_space: the dataset's observation space
+    :param observation_space: the dataset's observation space (flattened, for Dict observations)
     :param action_space: the dataset's original (unscaled) action space
     :param dataset_id: Minari id, if known
     :param env_id: Gymnasium id of the environment, from the dataset's ``env_spec``
@@ -106,6 +111,8 @@ class OfflineDataset:
     :param ref_max_score: expert-policy return, for normalised scores
     :param episode_returns: ``[n_episodes]`` float64, undiscounted return of each episode
     :param metadata: raw Minari metadata (``env_spec`` JSON etc.)
+    :param dict_observation_space: the original ``Dict`` observation space, if the dataset's observations
+        are dicts (the arrays hold them flattened in its key order)
     """
 
     observations: np.ndarray
@@ -121,6 +128,7 @@ class OfflineDataset:
     ref_max_score: float | None = None
     episode_returns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float64))
     metadata: dict[str, Any] = field(default_factory=dict, repr=False)
+    dict_observation_space: gym.spaces.Dict | None = None
 
     def __len__(self) -> int:
         return int(self.observations.shape[0])
@@ -370,8 +378,13 @@ def _check_spaces(observation_space: gym.Space, action_space: gym.Space, where: 
             f"{where} has action space {action_space}: POLA needs continuous (Box) actions, "
             "discrete action spaces are not supported"
         )
-    if not isinstance(observation_space, gym.spaces.Box) or len(observation_space.shape) != 1:
-        raise DatasetError(f"{where} has observation space {observation_space}: a flat Box is needed")
+    if isinstance(observation_space, gym.spaces.Dict):
+        try:
+            check_dict_space(observation_space, where)
+        except ValueError as error:
+            raise DatasetError(str(error)) from None
+    elif not isinstance(observation_space, gym.spaces.Box) or len(observation_space.shape) != 1:
+        raise DatasetError(f"{where} has observation space {observation_space}: a flat Box (or a Dict of Boxes) is needed")
     if len(action_space.shape) != 1:
         raise DatasetError(f"{where} has action space {action_space}: a flat Box is needed")
     if not (np.all(np.isfinite(action_space.low)) and np.all(np.isfinite(action_space.high))):
@@ -387,8 +400,9 @@ def _build_arrays(
     action_space: gym.spaces.Box,
     where: str,
     progress: bool,
+    dict_space: gym.spaces.Dict | None = None,
 ) -> dict[str, np.ndarray]:
-    """Concatenate episodes into preallocated arrays (no list of per-episode copies)."""
+    """Concatenate episodes into preallocated arrays (no list of per-episode copies); dict observations flattened."""
     obs = np.empty((n_steps, obs_dim), dtype=np.float32)
     next_obs = np.empty((n_steps, obs_dim), dtype=np.float32)
     actions = np.empty((n_steps, act_dim), dtype=np.float32)
@@ -406,10 +420,13 @@ def _build_arrays(
 
             episodes = tqdm(episodes, total=n_episodes, desc=f"reading {where}", unit="ep", leave=False)
     for episode in episodes:
-        ep_obs = np.asarray(episode["observations"]).reshape(-1, obs_dim)
         ep_act = np.asarray(episode["actions"], dtype=np.float64).reshape(-1, act_dim)
         ep_rew = np.asarray(episode["rewards"], dtype=np.float64).reshape(-1)
         length = len(ep_rew)
+        if dict_space is not None:
+            ep_obs = flatten_episode_observations(dict_space, episode["observations"], length + 1)
+        else:
+            ep_obs = np.asarray(episode["observations"]).reshape(-1, obs_dim)
         if len(ep_obs) != length + 1 or len(ep_act) != length:
             raise DatasetError(
                 f"{where}: episode {n_seen} has {len(ep_obs)} observations, {len(ep_act)} actions and "
@@ -447,8 +464,18 @@ def _build_arrays(
     }
 
 
-def _same_spaces(dataset_space: gym.spaces.Box, env_space: gym.Space, bounds: bool) -> bool:
-    if not isinstance(env_space, gym.spaces.Box) or env_space.shape != dataset_space.shape:
+def _same_spaces(dataset_space: gym.Space, env_space: gym.Space, bounds: bool) -> bool:
+    if isinstance(dataset_space, gym.spaces.Dict):  # the env's own dict observations: same keys and shapes
+        return (
+            isinstance(env_space, gym.spaces.Dict)
+            and list(env_space.spaces) == list(dataset_space.spaces)
+            and all(_same_spaces(sub, env_space.spaces[k], bounds) for k, sub in dataset_space.spaces.items())
+        )
+    if (
+        not isinstance(dataset_space, gym.spaces.Box)
+        or not isinstance(env_space, gym.spaces.Box)
+        or env_space.shape != dataset_space.shape
+    ):
         return False
     if not bounds:
         return True
@@ -482,13 +509,19 @@ def load_offline_dataset(
     where = f"dataset {dataset_id!r} ({data_dir})"
     observation_space, action_space = _spaces(metadata, data_dir)
     _check_spaces(observation_space, action_space, where)
+    dict_space = observation_space if isinstance(observation_space, gym.spaces.Dict) else None
+    if dict_space is not None:
+        observation_space = flat_space(dict_space)
     assert isinstance(observation_space, gym.spaces.Box) and isinstance(action_space, gym.spaces.Box)
     if env is not None:
-        obs_ok = _same_spaces(observation_space, env.observation_space, bounds=False)
+        dataset_obs_space = (
+            dict_space if dict_space is not None and isinstance(env.observation_space, gym.spaces.Dict) else observation_space
+        )
+        obs_ok = _same_spaces(dataset_obs_space, env.observation_space, bounds=False)
         act_ok = _same_spaces(action_space, env.action_space, bounds=True)
         if not (obs_ok and act_ok):
             raise SpaceMismatchError(
-                f"{where} does not match the env: dataset observation space {observation_space} vs env "
+                f"{where} does not match the env: dataset observation space {dict_space or observation_space} vs env "
                 f"{env.observation_space}; dataset action space {action_space} vs env {env.action_space}"
             )
     n_steps = int(metadata.get("total_steps", 0))
@@ -510,7 +543,7 @@ def load_offline_dataset(
 
         storage = MinariStorage.read(data_dir)
         episodes = storage.get_episodes(range(n_episodes))
-        arrays = _build_arrays(episodes, n_steps, n_episodes, obs_dim, act_dim, action_space, where, progress)
+        arrays = _build_arrays(episodes, n_steps, n_episodes, obs_dim, act_dim, action_space, where, progress, dict_space)
         if cache_file is not None:
             _save_cache(cache_file, arrays)
 
@@ -529,22 +562,30 @@ def load_offline_dataset(
         ref_max_score=None if ref_max is None else float(ref_max),
         episode_returns=arrays["episode_returns"],
         metadata=metadata,
+        dict_observation_space=dict_space,
     )
 
 
-def make_env(dataset: OfflineDataset | str | os.PathLike, **env_kwargs: Any) -> gym.Env:
-    """The environment a dataset was recorded in, from its Minari ``env_spec`` (with its time limit).
+def make_env(dataset: OfflineDataset | str | os.PathLike, eval_env: bool = True, **env_kwargs: Any) -> gym.Env:
+    """The environment to evaluate a policy of the dataset in, from its Minari env spec (with its time limit).
+
+    Minari datasets may record an ``eval_env_spec`` next to the ``env_spec`` they were collected in (the
+    maze datasets: a fixed goal, as D4RL evaluates); it is preferred, as ``recover_environment(eval_env=True)``
+    does. Dict observations come flattened, in the order of the dataset's arrays (``FlattenObservation``).
 
     :param dataset: a loaded dataset, or a Minari id / dataset folder
+    :param eval_env: prefer the ``eval_env_spec``; ``False``: the env the data was collected in
     :param env_kwargs: extra arguments for ``gym.make`` (e.g. ``render_mode``)
     :return: a new environment
     """
     if isinstance(dataset, OfflineDataset):
         metadata = dataset.metadata
         if not metadata.get("env_spec") and dataset.env_id is not None:
-            return gym.make(dataset.env_id, **env_kwargs)
+            return flatten_env(gym.make(dataset.env_id, **env_kwargs))
     else:
         metadata = read_metadata(resolve_dataset_path(dataset))
+    if eval_env and metadata.get("eval_env_spec"):
+        metadata = {**metadata, "env_spec": metadata["eval_env_spec"]}
     spec_str = metadata.get("env_spec")
     if not spec_str:
         raise DatasetError(f"Dataset {metadata.get('dataset_id')!r} records no environment (env_spec)")
@@ -556,7 +597,7 @@ def make_env(dataset: OfflineDataset | str | os.PathLike, **env_kwargs: Any) -> 
         .replace('"apply_api_compatibility": false,', "")
         .replace('"autoreset": false, ', "")
     )
-    return gym.make(EnvSpec.from_json(spec_str), **env_kwargs)
+    return flatten_env(gym.make(EnvSpec.from_json(spec_str), **env_kwargs))
 
 
 def main(argv: list[str] | None = None) -> int:

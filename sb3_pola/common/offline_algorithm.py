@@ -11,6 +11,7 @@ import warnings
 from collections import deque
 from typing import Any, TypeVar
 
+import gymnasium as gym
 import numpy as np
 import torch as th
 from gymnasium import spaces
@@ -23,6 +24,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.checkpoint import DivergenceError, validate_model_file
 from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env, normalized_score
+from sb3_pola.common.dict_obs import flatten_env, flatten_observation
 
 SelfOfflineAlgorithm = TypeVar("SelfOfflineAlgorithm", bound="OfflineAlgorithm")
 
@@ -92,13 +94,18 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         supported_action_spaces: tuple[type[spaces.Space], ...] | None = (spaces.Box,),
     ) -> None:
         data: OfflineDataset | None = None
+        if isinstance(env, str):  # made here rather than by SB3, so that dict observations can be flattened
+            env = gym.make(env)
+        env_dict_space = env.observation_space if env is not None and isinstance(env.observation_space, spaces.Dict) else None
         if isinstance(dataset, OfflineDataset):
             data = dataset
         elif dataset is not None:
             # a VecEnv has the same spaces as its envs, which is all the check reads
-            data = load_offline_dataset(dataset, env=None if isinstance(env, str) else env, download=download)  # type: ignore[arg-type]
+            data = load_offline_dataset(dataset, env=env, download=download)  # type: ignore[arg-type]
             if env is None:
                 env = self._env_from_dataset(data, verbose)
+        if env is not None:
+            env = flatten_env(env)
         super().__init__(
             policy,
             env,  # type: ignore[arg-type]
@@ -125,6 +132,10 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         self._stat_sums: dict[str, th.Tensor] = {}
         self._stat_count = 0
         self._offline_data = data
+        # the original Dict space of dict observations (the networks see them flattened, see common.dict_obs)
+        self.dict_observation_space: spaces.Dict | None = data.dict_observation_space if data is not None else None
+        if self.dict_observation_space is None and env_dict_space is not None:
+            self.dict_observation_space = env_dict_space
         # gradient steps between two NaN/inf checks of losses and parameters (also done at every log dump)
         self.check_finite_freq = 100
         self._last_finite_step = 0
@@ -181,6 +192,17 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
 
     def _check_dataset_spaces(self, data: OfflineDataset) -> None:
         assert self.observation_space is not None and self.action_space is not None
+        ours, theirs = self.dict_observation_space, data.dict_observation_space
+        same_dict = ours is None and theirs is None
+        if ours is not None and theirs is not None:
+            same_dict = list(ours.spaces) == list(theirs.spaces) and all(
+                ours.spaces[k].shape == theirs.spaces[k].shape for k in ours.spaces
+            )
+        if not same_dict:
+            raise ValueError(
+                f"The dataset's observation space {theirs or data.observation_space} does not match the model's "
+                f"{ours or self.observation_space}"
+            )
         if data.observation_space.shape != self.observation_space.shape or data.action_space.shape != self.action_space.shape:
             raise ValueError(
                 f"The dataset's spaces (observation {data.observation_space}, action {data.action_space}) do not match "
@@ -349,12 +371,19 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
             data = validate_model_file(path, policies, cls.__name__)
             if env is not None:
                 obs_space, act_space = env.observation_space, env.action_space
-                if obs_space != data["observation_space"] or act_space != data["action_space"]:
+                model_obs_space = data["observation_space"]
+                if isinstance(obs_space, spaces.Dict):  # the env's own dict observations: compare the original spaces
+                    model_obs_space = data.get("dict_observation_space") or model_obs_space
+                if obs_space != model_obs_space or act_space != data["action_space"]:
+                    original = data.get("dict_observation_space")
+                    flattened = f" (flattened from {original})" if original is not None and original != model_obs_space else ""
                     raise ValueError(
-                        f"Cannot load {path} onto this env: the model has observation space {data['observation_space']} "
+                        f"Cannot load {path} onto this env: the model has observation space {model_obs_space}{flattened} "
                         f"and action space {data['action_space']}, the env has observation space {obs_space} "
                         f"and action space {act_space}"
                     )
+            if env is not None:
+                env = flatten_env(env)
         return super().load(  # type: ignore[return-value]
             path,
             env=env,
@@ -374,12 +403,20 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         """SB3's ``predict``, after checking the observation's shape and that it holds no NaN or inf.
 
-        :param observation: one observation ``obs_shape`` or a batch ``[n, *obs_shape]``
+        :param observation: one observation ``obs_shape`` or a batch ``[n, *obs_shape]``; for a model of Dict
+            observations also the env's own dict (each key one value or a batch), flattened as the dataset
         :param state: recurrent state (unused)
         :param episode_start: episode starts (unused)
         :param deterministic: deterministic action
         :return: the action(s) and the state
         """
+        if isinstance(observation, dict):
+            if self.dict_observation_space is None:
+                raise ValueError(
+                    f"predict got a dict observation (keys {sorted(observation)}); this model's observation space is "
+                    f"{self.observation_space}: pass an array"
+                )
+            observation = flatten_observation(self.dict_observation_space, observation)
         self._check_observation(observation)
         return super().predict(observation, state, episode_start, deterministic)
 

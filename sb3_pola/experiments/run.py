@@ -56,6 +56,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     # One thread by default: the light configuration's small matmuls gain little from more, and on a
     # machine whose cores are busy OpenMP's waiting made a 2-thread run 3.5x slower (6.8 vs 24 steps/s).
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: torch's default)")
+    parser.add_argument("--extra", help="JSON of further POLA arguments, e.g. '{\"backprop_through_model\": false}'")
     return parser.parse_args(argv)
 
 
@@ -102,7 +103,11 @@ def main(argv: list[str] | None = None) -> int:
     dataset_return = float(np.mean(data.episode_returns))
     dataset_score = data.normalized_score(data.episode_returns)
     eval_env = DummyVecEnv([lambda: Monitor(make_env(data))])
-    hyperparameters = {**CONFIGS[args.config], **({"compile_update": True} if args.compile else {})}
+    hyperparameters = {
+        **CONFIGS[args.config],
+        **({"compile_update": True} if args.compile else {}),
+        **(json.loads(args.extra) if args.extra else {}),
+    }
     model = POLA("MlpPolicy", dataset=args.dataset, seed=args.seed, device=args.device, **hyperparameters)
     eval_env.seed(args.seed + 1000)
 

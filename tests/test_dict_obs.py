@@ -1,0 +1,168 @@
+"""Dict observations: a goal-style Minari dataset through the loader, the env, the policy, predict and save/load."""
+
+from __future__ import annotations
+
+import pathlib
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from pola_data import light_kwargs, record_random_dataset
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from sb3_pola import POLA
+from sb3_pola.common.datasets import DatasetError, OfflineDataset, load_offline_dataset, make_env
+from sb3_pola.common.dict_obs import check_dict_space, flatten_observation
+
+KEYS = ["achieved_goal", "desired_goal", "observation"]  # Gymnasium's (sorted) order, the flattening order
+
+
+@pytest.fixture(scope="module")
+def goal_dataset(tmp_path_factory: pytest.TempPathFactory) -> str:
+    return str(record_random_dataset(tmp_path_factory.mktemp("goal"), "goalpendulum/random-v0", "GoalPendulum-v0", 400))
+
+
+@pytest.fixture(scope="module")
+def goal_model(goal_dataset: str) -> POLA:
+    return POLA("MlpPolicy", dataset=goal_dataset, **light_kwargs()).learn(4)
+
+
+def test_dataset_is_flattened_in_the_spaces_key_order(goal_dataset: str) -> None:
+    data = load_offline_dataset(goal_dataset, use_cache=False)
+    assert isinstance(data.dict_observation_space, gym.spaces.Dict)
+    assert list(data.dict_observation_space.spaces) == KEYS
+    assert data.observation_space.shape == (5,) and data.observations.shape == (400, 5)
+    # the first reset of the recording (seed 0), flattened by Gymnasium, is the first row
+    env = gym.make("GoalPendulum-v0")
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_allclose(data.observations[0], gym.spaces.flatten(env.observation_space, obs), rtol=1e-6)
+    np.testing.assert_allclose(data.observations[0], np.concatenate([obs[k] for k in KEYS]), rtol=1e-6)
+    np.testing.assert_array_equal(data.next_observations[:-1][data.dones[:-1] == 0][:5], data.observations[1:6])
+    # cached arrays read back equal
+    load_offline_dataset(goal_dataset)
+    again = load_offline_dataset(goal_dataset)
+    np.testing.assert_array_equal(again.observations, data.observations)
+    assert again.dict_observation_space == data.dict_observation_space
+
+
+def test_dataset_env_check(goal_dataset: str) -> None:
+    load_offline_dataset(goal_dataset, env=gym.make("GoalPendulum-v0"), use_cache=False)  # the env's own dict space
+    with pytest.raises(DatasetError, match=r"does not match the env.*Dict"):
+        load_offline_dataset(goal_dataset, env=gym.make("Pendulum-v1"), use_cache=False)
+
+
+def test_make_env_flattens_as_the_dataset(goal_dataset: str) -> None:
+    data = load_offline_dataset(goal_dataset)
+    env = make_env(data)
+    assert env.observation_space == data.observation_space
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_allclose(obs, data.observations[0], rtol=1e-6)
+    assert make_env(goal_dataset).observation_space == data.observation_space
+
+
+def test_only_dicts_of_boxes() -> None:
+    box = gym.spaces.Box(-1, 1, (2,))
+    check_dict_space(gym.spaces.Dict({"a": box}), "x")
+    for space in (
+        gym.spaces.Dict({"a": box, "b": gym.spaces.Discrete(3)}),
+        gym.spaces.Dict({"a": gym.spaces.Dict({"b": box})}),
+    ):
+        with pytest.raises(ValueError, match="Box spaces only"):
+            check_dict_space(space, "x")
+
+
+def test_flatten_observation_single_and_batch() -> None:
+    space = gym.spaces.Dict({"b": gym.spaces.Box(-1, 1, (2,)), "a": gym.spaces.Box(-1, 1, (1,))})
+    assert list(space.spaces) == ["a", "b"]
+    np.testing.assert_array_equal(flatten_observation(space, {"b": [1, 2], "a": [3]}), [3, 1, 2])
+    batch = flatten_observation(space, {"b": np.zeros((4, 2)), "a": np.ones((4, 1))})
+    assert batch.shape == (4, 3) and (batch[:, 0] == 1).all()
+    with pytest.raises(ValueError, match="keys"):
+        flatten_observation(space, {"a": [3]})
+    with pytest.raises(ValueError, match="shape"):
+        flatten_observation(space, {"b": [1, 2, 3], "a": [3]})
+    with pytest.raises(ValueError, match="batch sizes"):
+        flatten_observation(space, {"b": np.zeros((4, 2)), "a": np.ones((3, 1))})
+
+
+def test_trains_and_predicts_from_dict_observations(goal_model: POLA) -> None:
+    model = goal_model
+    assert model.num_timesteps == 4 and model.observation_space.shape == (5,)
+    assert model.dict_observation_space is not None and list(model.dict_observation_space.spaces) == KEYS
+    assert model.policy.features_extractor.features_dim == 5 + 5 * 4 // 2  # the state products of the flat vector
+    env = gym.make("GoalPendulum-v0")
+    obs, _ = env.reset(seed=3)
+    action, _ = model.predict(obs, deterministic=True)
+    flat, _ = model.predict(gym.spaces.flatten(env.observation_space, obs), deterministic=True)
+    assert action.shape == (1,)
+    np.testing.assert_array_equal(action, flat)
+    batch = {k: np.stack([obs[k]] * 3) for k in obs}
+    actions, _ = model.predict(batch, deterministic=True)
+    assert actions.shape == (3, 1)
+    np.testing.assert_allclose(actions, np.stack([action] * 3), atol=1e-6)
+    with pytest.raises(ValueError, match="keys"):
+        model.predict({"observation": obs["observation"]})
+    with pytest.raises(ValueError, match="NaN"):
+        model.predict({**obs, "desired_goal": np.array([np.nan], dtype=np.float32)})
+
+
+def test_env_with_dict_observations(goal_dataset: str) -> None:
+    model = POLA("MlpPolicy", env=gym.make("GoalPendulum-v0"), dataset=goal_dataset, **light_kwargs(rollout_length=0))
+    assert model.observation_space.shape == (5,) and model.dict_observation_space is not None
+    model.learn(2)
+    model = POLA("MlpPolicy", env="GoalPendulum-v0", dataset=goal_dataset, **light_kwargs(rollout_length=0))
+    assert model.observation_space.shape == (5,)
+    venv = DummyVecEnv([lambda: gym.make("GoalPendulum-v0")] * 2)
+    model = POLA("MlpPolicy", env=venv, dataset=goal_dataset, **light_kwargs(rollout_length=0))
+    assert model.observation_space.shape == (5,) and model.dict_observation_space == venv.observation_space
+    assert model.env is not None
+    model.env.seed(1)
+    first = model.env.reset()
+    assert first.shape == (2, 5)
+    raw = gym.make("GoalPendulum-v0").reset(seed=1)[0]
+    np.testing.assert_allclose(first[0], gym.spaces.flatten(venv.observation_space, raw), rtol=1e-6)
+    obs, _, dones, _ = model.env.step(np.zeros((2, 1), dtype=np.float32))
+    assert obs.shape == (2, 5) and not dones.any()
+    model.learn(2)
+
+
+def test_save_load_keeps_the_dict_space(goal_model: POLA, goal_dataset: str, tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "goal.zip"
+    goal_model.save(path)
+    env = gym.make("GoalPendulum-v0")
+    obs, _ = env.reset(seed=5)
+    expected, _ = goal_model.predict(obs, deterministic=True)
+    for loaded in (POLA.load(path, device="cpu"), POLA.load(path, env=env, device="cpu")):
+        assert loaded.dict_observation_space == goal_model.dict_observation_space
+        np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], expected)
+    POLA.load(path, env=make_env(goal_dataset), device="cpu")  # the flattened env
+    with pytest.raises(
+        ValueError, match=r"model has observation space Box.*flattened from Dict\(.*the env has observation space Box"
+    ):
+        POLA.load(path, env=gym.make("Pendulum-v1"), device="cpu")
+    # continuing on another dataset of other spaces: a clear error naming both
+    other = record_random_dataset(tmp_path, "pendulum/random-v0", "Pendulum-v1", 50)
+    with pytest.raises(ValueError, match=r"observation space Box.*does not match the model's Dict"):
+        POLA.load(path, dataset=str(other), device="cpu").learn(1)
+
+
+def test_flat_model_refuses_dict_observations(goal_model: POLA, tmp_path: pathlib.Path) -> None:
+    data = record_random_dataset(tmp_path, "pendulum/random-v0", "Pendulum-v1", 50)
+    model = POLA("MlpPolicy", dataset=str(data), **light_kwargs())
+    with pytest.raises(ValueError, match=r"dict observation.*pass an array"):
+        model.predict({"observation": np.zeros(3)})
+    assert isinstance(load_offline_dataset(str(data)), OfflineDataset)
+
+
+def test_make_env_prefers_the_eval_env_spec(tmp_path: pathlib.Path) -> None:
+    """Minari's ``eval_env_spec`` (the mazes: a fixed goal) is the env to evaluate in; ``env_spec`` the one collected in."""
+    import json
+
+    path = record_random_dataset(tmp_path, "pendulum/random-v0", "Pendulum-v1", 20)
+    metadata_file = path / "data" / "metadata.json"
+    metadata = json.loads(metadata_file.read_text())
+    spec = json.loads(metadata["env_spec"])
+    metadata["eval_env_spec"] = json.dumps({**spec, "max_episode_steps": 77})
+    metadata_file.write_text(json.dumps(metadata))
+    assert make_env(str(path)).spec.max_episode_steps == 77
+    assert make_env(str(path), eval_env=False).spec.max_episode_steps == spec["max_episode_steps"]

@@ -1,0 +1,31 @@
+"""The main job (``sb3-pola run`` / ``make train``) end to end on the shipped dataset, at a tiny budget."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+from sb3_pola import POLA
+from sb3_pola.experiments import run
+
+
+def test_main_job_writes_model_curve_and_results(tmp_path: pathlib.Path) -> None:
+    out = tmp_path / "main"
+    extra = {
+        "backprop_through_model": False,
+        "batch_size": 16,
+        "policy_kwargs": {"net_arch": [16]},
+        "dynamics_kwargs": {"n_members": 2, "n_elites": 1, "hidden_dim": 16, "n_layers": 2},
+        "dynamics_fit_kwargs": {"max_epochs": 1},
+    }
+    argv = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", "--final-episodes", "1", "--out", str(out)]
+    assert run.main([*argv, "--extra", json.dumps(extra)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["dataset"] == "invertedpendulum/medium-v0" and results["gradient_steps"] == 6
+    assert results["hyperparameters"]["backprop_through_model"] is False  # --extra reaches the model
+    assert results["hyperparameters"]["n_critics"] == run.LIGHT_CONFIG["n_critics"]
+    assert results["curve"]["steps"] == [0, 3, 6, 6]
+    assert results["normalized_score"] is not None
+    assert (out / "learning_curve.png").stat().st_size > 0
+    model = POLA.load(out / "model.zip", device="cpu")
+    assert model.num_timesteps == 6 and model.backprop_through_model is False
