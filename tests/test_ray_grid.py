@@ -7,6 +7,7 @@ import os
 import pathlib
 import sys
 from collections.abc import Iterator
+from dataclasses import asdict
 from typing import Any
 
 import pytest
@@ -112,6 +113,7 @@ def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
     return [tuple(r[k] for k in score.CSV_FIELDS if k != "wall_s") for r in rows]
 
 
+@pytest.mark.slow  # 3 to 5 minutes on the shared 2-core VM (Ray's start, two workers' imports, three grid runs)
 def test_ray_grid_equals_sequential_and_recovers(
     data_root: pathlib.Path, local_ray: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture
 ) -> None:
@@ -152,6 +154,35 @@ def test_ray_grid_equals_sequential_and_recovers(
         state = POLA.load(distributed / "models" / name, device="cpu").policy.state_dict()
         assert all(th.equal(state[key], value) for key, value in expected_state.items()), name
     assert not list((distributed / "ckpt").glob("*.zip"))
+
+
+def test_a_cell_task_after_its_dynamics_fit_is_the_sequential_cell(
+    data_root: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The workers' side without Ray: the fit stops after step 1 with a checkpoint, the cell resumes from it."""
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(data_root))
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    try:
+        config = score.build_config(score.parse_args(TINY), "cpu")
+        cell = (DATASETS[0], "T1", 0)
+        name = score.cell_name(*cell)
+        assert score.run_cell(*cell, config, tmp_path / "sequential", "cpu", verbose=0)
+        out = tmp_path / "grid"
+        common = (asdict(config), str(out), "cpu", 1, 0)
+        assert ray_grid.cell_task(cell, *common, True, {}) is False
+        assert score.dynamics_path(out, *cell[::2], config).exists() and (out / "ckpt" / f"{name}.zip").exists()
+        assert score.read_rows(ray_grid.rows_path(out, cell)) == []
+        assert ray_grid.cell_task(cell, *common, False, {}) is True
+        assert ray_grid.cell_task(cell, *common, False, {}) is True  # finished: nothing is run again
+    finally:
+        th.set_num_threads(threads)
+    rows = score.read_rows(ray_grid.rows_path(out, cell))
+    assert [r["step"] for r in rows] == [10, 20]
+    assert comparable(rows) == comparable(score.read_rows(tmp_path / "sequential" / "scores.csv"))
+    expected = POLA.load(tmp_path / "sequential" / "models" / f"{name}.zip", device="cpu").policy.state_dict()
+    state = POLA.load(out / "models" / f"{name}.zip", device="cpu").policy.state_dict()
+    assert all(th.equal(state[key], value) for key, value in expected.items())
 
 
 def test_missing_ray_says_which_extra(
