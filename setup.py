@@ -8,6 +8,7 @@ with open(os.path.join("sb3_pola", "version.txt")) as file_handler:
 # ONNX export (torch.onnx's exporter needs onnx and onnxscript) and ONNX Runtime to run the exported file
 EXPORT_REQUIRES = ["onnx>=1.16", "onnxscript>=0.3", "onnxruntime>=1.18"]
 MAZE_REQUIRES = ["gymnasium-robotics>=1.4"]
+RAY_REQUIRES = ["ray>=2.10"]
 
 long_description = open("README.md").read() if os.path.exists("README.md") else ""
 
@@ -38,7 +39,9 @@ setup(
         # Gymnasium-Robotics point mazes: sb3-pola collect --env PointMaze_...
         "maze": MAZE_REQUIRES,
         "export": EXPORT_REQUIRES,
-        "tests": ["pytest", "pytest-xdist", "pytest-timeout", *MAZE_REQUIRES, *EXPORT_REQUIRES],
+        # sb3-pola score --ray (plain ray; "ray[default]" adds the dashboard)
+        "ray": RAY_REQUIRES,
+        "tests": ["pytest", "pytest-xdist", "pytest-timeout", *MAZE_REQUIRES, *EXPORT_REQUIRES, *RAY_REQUIRES],
         "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
     },
     entry_points={"console_scripts": ["sb3-pola=sb3_pola.cli:main"]},

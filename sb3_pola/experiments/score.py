@@ -20,7 +20,8 @@ dataset's env (D4RL-normalised score from the dataset's reference scores). Outpu
 candidates ranked by the critic, as Diffusion-QL evaluates) and writes ``reeval.csv`` and ``reeval.md``.
 
 An interrupted run is resumed by the same command: finished cells are skipped, a running cell
-continues from its last checkpoint. Presets: ``cpu`` (light networks, a few thousand steps),
+continues from its last checkpoint. ``--ray [ADDRESS]`` runs the cells as Ray tasks, on this machine or a
+cluster (:mod:`sb3_pola.experiments.ray_grid`). Presets: ``cpu`` (light networks, a few thousand steps),
 ``paper`` (the paper's configuration, for a CUDA GPU), ``auto`` (``paper`` on CUDA, else ``cpu``).
 Any preset value can be overridden from the command line.
 """
@@ -347,8 +348,37 @@ def _train_logger(folder: pathlib.Path, done_steps: int) -> Any:
     return Logger(folder=str(folder), output_formats=[CSVOutputFormat(str(folder / f"progress_from{done_steps}.csv"))])
 
 
-def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib.Path, device: str, verbose: int = 1) -> None:
+def dynamics_path(out: pathlib.Path, dataset: str, seed: int, config: Config) -> pathlib.Path:
+    """Where a cell's fitted dynamics model is kept: one per dataset with ``share_dynamics``, else one per (dataset, seed)."""
+    dyn_seed = "shared" if config.share_dynamics else f"seed{seed}"
+    return out / "dynamics" / f"{slug(dataset)}__{dyn_seed}.pt"
+
+
+def needs_dynamics(variant: str, config: Config) -> bool:
+    """Whether a variant's model has a dynamics model to fit (a look-ahead, ``rollout_length > 0``)."""
+    import inspect
+
+    from sb3_pola.pola import POLA
+
+    default = inspect.signature(POLA.__init__).parameters["rollout_length"].default
+    return int(pola_kwargs({**config.extra, **VARIANTS[variant][1]}).get("rollout_length", default)) > 0
+
+
+def run_cell(
+    dataset: str,
+    variant: str,
+    seed: int,
+    config: Config,
+    out: pathlib.Path,
+    device: str,
+    verbose: int = 1,
+    rows_csv: pathlib.Path | None = None,
+    stop_after_dynamics: bool = False,
+) -> bool:
     """Train and evaluate one (dataset, variant, seed) cell, resuming from its checkpoint if there is one.
+
+    Checkpoints carry the RNG states (:func:`~sb3_pola.common.checkpoint.save_checkpoint`), so on CPU a
+    resumed cell ends with the scores of an uninterrupted one.
 
     :param dataset: Minari dataset id
     :param variant: a key of :data:`VARIANTS`
@@ -357,23 +387,28 @@ def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib
     :param out: output folder
     :param device: torch device
     :param verbose: 0 silent, 1 a line per evaluation
+    :param rows_csv: where this cell's evaluation rows go (``out/scores.csv`` if ``None``)
+    :param stop_after_dynamics: stop (with a checkpoint) after the first gradient step once the dynamics model
+        is fitted and saved, so that other cells can share it while this one continues later
+    :return: whether the cell finished (its marker is written)
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
+    from sb3_pola.common.checkpoint import load_checkpoint, remove_stale_temp_files, save_checkpoint
     from sb3_pola.common.datasets import make_env
     from sb3_pola.pola import POLA
 
     _, kwargs, policy_kwargs = VARIANTS[variant]
     name = cell_name(dataset, variant, seed)
-    csv_path, ckpt = out / "scores.csv", out / "ckpt" / f"{name}.zip"
+    csv_path, ckpt = rows_csv or out / "scores.csv", out / "ckpt" / f"{name}.zip"
     ckpt.parent.mkdir(parents=True, exist_ok=True)
-    dyn_seed = "shared" if config.share_dynamics else f"seed{seed}"
-    dyn_path = out / "dynamics" / f"{slug(dataset)}__{dyn_seed}.pt"
+    remove_stale_temp_files(ckpt)
+    dyn_path = dynamics_path(out, dataset, seed, config)
     dyn_path.parent.mkdir(parents=True, exist_ok=True)
     previous_wall = 0.0
     rows = [r for r in read_rows(csv_path) if (r["dataset"], r["variant"], r["seed"]) == (dataset, variant, seed)]
     if ckpt.exists():
-        model = POLA.load(ckpt, dataset=dataset, device=device)
+        model = cast(POLA, load_checkpoint(POLA, ckpt, dataset=dataset, device=device))
         done_steps = model.num_timesteps
         if rows:
             previous_wall = max((r["wall_s"] for r in rows if r["step"] <= done_steps), default=0.0)
@@ -432,19 +467,23 @@ def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib
                     "wall_s": round(previous_wall + time.perf_counter() - start, 1),
                 }
                 append_row(csv_path, row)
-                model.save(ckpt)
+                save_checkpoint(model, ckpt)
                 if verbose:
                     print(
                         f"[score] {name} step {step}: score {row['score']:.1f} "
                         f"(return {row['mean_return']:.0f}), {row['wall_s']:.0f}s"
                     )
                     sys.stdout.flush()
-            return True
+            elif stop_after_dynamics:
+                save_checkpoint(model, ckpt)
+            return not stop_after_dynamics
 
     if remaining > 0:
         model.set_logger(_train_logger(out / "train" / name, done_steps))
         model.learn(remaining, callback=ScoreCallback(), reset_num_timesteps=done_steps == 0, log_interval=config.log_interval)
     env.close()
+    if stop_after_dynamics and model.num_timesteps < config.steps:
+        return False
     marker = out / "cells" / f"{name}.json"
     marker.parent.mkdir(parents=True, exist_ok=True)
     info = {"dataset": dataset, "variant": variant, "seed": seed, "steps": config.steps, "signature": config.signature()}
@@ -455,6 +494,7 @@ def run_cell(dataset: str, variant: str, seed: int, config: Config, out: pathlib
     if ckpt.exists():  # the last evaluation's checkpoint is the final model; keep it for diagnosis and re-evaluation
         ckpt.replace(models / f"{name}.zip")
     marker.write_text(json.dumps(info, indent=1))
+    return True
 
 
 # ----------------------------------------------------------------------------------------- re-evaluation
@@ -806,6 +846,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="RULE",
         help="re-evaluate the saved final models under these rules: ema, online, [online-]stochastic, [online-]candidates<N>",
     )
+    parser.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        metavar="ADDRESS",
+        help="run the cells as Ray tasks: no ADDRESS starts Ray on this machine, 'auto' or host:port joins a cluster",
+    )
+    parser.add_argument("--cpus-per-cell", type=float, default=1.0, help="with --ray: CPUs reserved per cell")
+    parser.add_argument("--gpus-per-cell", type=float, default=0.0, help="with --ray: GPUs per cell (0.25: four per GPU)")
+    parser.add_argument("--max-retries", type=int, default=3, help="with --ray: reruns of a cell whose worker died")
     parser.add_argument("--report-only", action="store_true", help="only rewrite table.md and the figures from scores.csv")
     parser.add_argument("--dry-run", action="store_true", help="print the resolved configuration and the cells, run nothing")
     parser.add_argument("-v", "--verbose", type=int, default=1)
@@ -815,6 +865,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     """``sb3-pola score``; returns the exit code."""
     args = parse_args(argv)
+    if "://" in args.out:
+        print(f"[score] --out {args.out}: a folder path is needed (with --ray, one every worker sees)", file=sys.stderr)
+        return 2
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.data_dir:
@@ -829,7 +882,8 @@ def main(argv: list[str] | None = None) -> int:
         import torch as th
 
         th.set_num_threads(args.threads)
-    device = resolve_device(args.device)
+    # the cells run on the cluster's GPUs, not on the driver's
+    device = "cuda" if args.ray and args.gpus_per_cell > 0 and args.device == "auto" else resolve_device(args.device)
     if args.reevaluate:
         saved = json.loads(config_path.read_text()) if config_path.exists() else {}
         episodes = args.eval_episodes or int(saved.get("eval_episodes", 10))
@@ -863,6 +917,10 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(info, indent=1))
         return 0
     config_path.write_text(json.dumps(info, indent=1))
+    if args.ray:
+        from sb3_pola.experiments.ray_grid import run_grid
+
+        return run_grid(args, cells, config, info, out, device)
     for dataset, variant, seed in cells:
         marker = out / "cells" / f"{cell_name(dataset, variant, seed)}.json"
         if marker.exists():

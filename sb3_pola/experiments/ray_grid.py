@@ -1,0 +1,245 @@
+"""``sb3-pola score --ray``: the score grid's (dataset, variant, seed) cells as Ray tasks, on one machine or a cluster.
+
+Every cell is one task running :func:`~sb3_pola.experiments.score.run_cell` against the output folder,
+which every worker must see (a shared folder on a cluster). A dynamics model shared by several cells is
+fitted first by a task of the cell that fits it in the sequential run: it stops after its first gradient
+step with a checkpoint, then every cell sharing the model starts, that one continuing from its checkpoint.
+On CPU the scores are therefore those of the sequential run.
+
+Each cell writes its evaluation rows to ``rows/<cell>.csv``; the driver merges them into ``scores.csv``
+(in the sequential run's order) while the grid runs, and rewrites ``table.md``, the figures and the
+diagnostics every few minutes and at the end. The same command resumes: finished cells are skipped and an interrupted cell
+continues from its checkpoint. A cell whose worker dies is retried (``--max-retries``); a failing cell is
+reported with its error while the others go on, and the exit code is then 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import sys
+import time
+from dataclasses import asdict
+from typing import Any
+
+from sb3_pola.experiments import score
+from sb3_pola.experiments.diagnostics import write_diagnostics
+
+MISSING_RAY = "sb3-pola score --ray needs Ray, an optional extra: pip install 'sb3-pola[ray]'"
+# seconds between two merges of the cells' rows into scores.csv, and between two rewrites of the reports (the
+# figures take seconds: not after every one of a large grid's cells)
+MERGE_INTERVAL = 10.0
+REPORT_INTERVAL = 120.0
+
+Cell = tuple[str, str, int]
+
+
+def rows_path(out: pathlib.Path, cell: Cell) -> pathlib.Path:
+    """The file of a cell's evaluation rows (``rows/<cell>.csv``), merged into ``scores.csv`` by the driver."""
+    return out / "rows" / f"{score.cell_name(*cell)}.csv"
+
+
+def marker_path(out: pathlib.Path, cell: Cell) -> pathlib.Path:
+    """The marker of a finished cell (``cells/<cell>.json``)."""
+    return out / "cells" / f"{score.cell_name(*cell)}.json"
+
+
+def _key(row: dict[str, Any]) -> Cell:
+    return row["dataset"], row["variant"], row["seed"]
+
+
+def adopt_rows(out: pathlib.Path, cells: list[Cell]) -> None:
+    """Give each cell its own rows file, from ``scores.csv`` (a sequential run interrupted, resumed with ``--ray``).
+
+    :param out: output folder
+    :param cells: the cells about to run
+    """
+    rows = score.read_rows(out / "scores.csv")
+    for cell in cells:
+        path = rows_path(out, cell)
+        mine = [r for r in rows if _key(r) == cell]
+        if mine and not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            score.write_rows(path, mine)
+
+
+def collect_rows(out: pathlib.Path, cells: list[Cell]) -> list[dict[str, Any]]:
+    """Rewrite ``scores.csv`` from the cells' rows files: the grid's cells in its order, then any other cell.
+
+    A cell with a rows file takes its rows from there; rows of other cells already in ``scores.csv`` are kept.
+
+    :param out: output folder
+    :param cells: the grid's cells, in the sequential run's order
+    :return: the rows written
+    """
+    files = {cell: rows_path(out, cell) for cell in cells}
+    listed = set(files.values())
+    folder = out / "rows"
+    others = sorted(p for p in folder.glob("*.csv") if p not in listed) if folder.is_dir() else []
+    by_cell: dict[Cell, list[dict[str, Any]]] = {}
+    for path in [*files.values(), *others]:
+        try:
+            rows = score.read_rows(path)
+        except (ValueError, KeyError, TypeError):  # a row being written right now (the next merge reads it whole)
+            continue
+        for row in rows:
+            by_cell.setdefault(_key(row), []).append(row)
+    merged = [r for r in score.read_rows(out / "scores.csv") if _key(r) not in by_cell]
+    for rows in by_cell.values():
+        merged += rows
+    if merged:
+        score.write_rows(out / "scores.csv", merged)
+    return merged
+
+
+def plan_dynamics_fits(cells: list[Cell], config: score.Config, out: pathlib.Path) -> dict[pathlib.Path, Cell]:
+    """For each dynamics model still to fit, the cell fitting it in the sequential run: the first one needing it.
+
+    :param cells: the cells to run, in the sequential run's order
+    :param config: the grid's configuration
+    :param out: output folder
+    :return: dynamics model path -> cell
+    """
+    fits: dict[pathlib.Path, Cell] = {}
+    for cell in cells:
+        path = score.dynamics_path(out, cell[0], cell[2], config)
+        if score.needs_dynamics(cell[1], config) and not path.exists() and path not in fits:
+            fits[path] = cell
+    return fits
+
+
+def cell_task(
+    cell: Cell,
+    config: dict[str, Any],
+    out: str,
+    device: str,
+    threads: int,
+    verbose: int,
+    stop_after_dynamics: bool,
+    environ: dict[str, str],
+    *after: Any,
+) -> bool:
+    """One cell on a Ray worker: :func:`~sb3_pola.experiments.score.run_cell` writing its rows to ``rows/``.
+
+    :param cell: (dataset, variant, seed)
+    :param config: the grid's :class:`~sb3_pola.experiments.score.Config` as a dict
+    :param out: output folder, seen by every worker
+    :param device: torch device
+    :param threads: torch CPU threads (a fixed count: results on CPU depend on it)
+    :param verbose: 0 silent, 1 a line per evaluation
+    :param stop_after_dynamics: only fit and save the dynamics model (see ``run_cell``)
+    :param environ: environment variables to set first (the datasets' folder)
+    :param after: results of the tasks to wait for (Ray passes them once they are done)
+    :return: whether the cell finished
+    """
+    import torch as th
+
+    os.environ.update(environ)
+    th.set_num_threads(threads)
+    folder = pathlib.Path(out)
+    if marker_path(folder, cell).exists():  # finished by its dynamics-fit task (a one-step budget) or by a retry
+        return True
+    path = rows_path(folder, cell)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return score.run_cell(
+        *cell, score.Config(**config), folder, device, verbose, rows_csv=path, stop_after_dynamics=stop_after_dynamics
+    )
+
+
+def _error_text(error: BaseException) -> str:
+    """The error of a failed task: the cell's own exception and traceback, or why Ray lost its worker."""
+    import ray
+
+    if isinstance(error, ray.exceptions.RayTaskError):
+        return str(error).strip()
+    return f"{type(error).__name__}: {error}"
+
+
+def run_grid(
+    args: argparse.Namespace,
+    cells: list[Cell],
+    config: score.Config,
+    info: dict[str, Any],
+    out: pathlib.Path,
+    device: str,
+) -> int:
+    """Run the cells as Ray tasks and write the sequential run's outputs; returns the exit code.
+
+    Uses the Ray instance this process is already connected to; else starts one on this machine (``--ray``
+    without an address) or joins the cluster at ``args.ray`` (``auto`` or ``host:port``), and stops it at the end.
+
+    :param args: the ``sb3-pola score`` arguments (``ray``, ``cpus_per_cell``, ``gpus_per_cell``, ``max_retries``,
+        ``threads``, ``data_dir``, ``variants``, ``verbose``)
+    :param cells: the grid, in the sequential run's order
+    :param config: its configuration
+    :param info: the content of ``config.json``
+    :param out: output folder, seen by every worker
+    :param device: torch device of the cells
+    :return: 0, 1 if a cell failed, 2 without Ray
+    """
+    try:
+        import ray
+    except ImportError:
+        print(MISSING_RAY, file=sys.stderr)
+        return 2
+    todo = [cell for cell in cells if not marker_path(out, cell).exists()]
+    if args.verbose:
+        for cell in cells:
+            if cell not in todo:
+                print(f"[score] {score.cell_name(*cell)}: done, skipped")
+    adopt_rows(out, todo)
+    environ = {"MINARI_DATASETS_PATH": os.environ["MINARI_DATASETS_PATH"]} if args.data_dir else {}
+    threads = args.threads or max(1, int(args.cpus_per_cell))
+    started = not ray.is_initialized()
+    if started and args.ray == "local":
+        ray.init(include_dashboard=False, log_to_driver=args.verbose > 0)
+    elif started:
+        ray.init(address=args.ray, log_to_driver=args.verbose > 0)
+    failures: list[tuple[str, BaseException]] = []
+    try:
+        remote = ray.remote(cell_task)
+        resources = dict(num_cpus=args.cpus_per_cell, num_gpus=args.gpus_per_cell, max_retries=args.max_retries)
+        common = (asdict(config), str(out.resolve()), device, threads, args.verbose)
+        pending: dict[Any, str] = {}
+        fits: dict[pathlib.Path, Any] = {}
+        for path, cell in plan_dynamics_fits(todo, config, out).items():
+            name = f"{score.cell_name(*cell)} (dynamics fit)"
+            fits[path] = remote.options(name=name, **resources).remote(cell, *common, True, environ)
+            pending[fits[path]] = name
+        for cell in todo:
+            name = score.cell_name(*cell)
+            fit = fits.get(score.dynamics_path(out, cell[0], cell[2], config))
+            after = [fit] if fit is not None and score.needs_dynamics(cell[1], config) else []
+            pending[remote.options(name=name, **resources).remote(cell, *common, False, environ, *after)] = name
+        cpus = ray.cluster_resources().get("CPU", 0)
+        print(f"[score] {len(todo)} cells on Ray ({cpus:.0f} CPUs), {len(fits)} dynamics fits")
+        last_merge = last_report = time.monotonic()
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=MERGE_INTERVAL)
+            for ref in done:
+                name = pending.pop(ref)
+                try:
+                    ray.get(ref)
+                except Exception as error:  # the cell's exception, or a worker lost more often than retried
+                    failures.append((name, error))
+                    print(f"[score] {name} failed:\n{_error_text(error)}", file=sys.stderr)
+            now = time.monotonic()
+            if now - last_merge >= MERGE_INTERVAL or done:
+                collect_rows(out, cells)
+                last_merge = now
+            if now - last_report >= REPORT_INTERVAL and pending:
+                score.write_reports(out, args.variants, info)
+                write_diagnostics(out)
+                last_report = now
+    finally:
+        if started:
+            ray.shutdown()
+    collect_rows(out, cells)
+    score.write_reports(out, args.variants, info)
+    write_diagnostics(out)
+    if failures:
+        print(f"[score] {len(failures)} task(s) failed: " + ", ".join(name for name, _ in failures), file=sys.stderr)
+        print("[score] the same command resumes them (finished cells are skipped)", file=sys.stderr)
+        return 1
+    return 0
