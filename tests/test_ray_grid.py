@@ -113,7 +113,8 @@ def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
     return [tuple(r[k] for k in score.CSV_FIELDS if k != "wall_s") for r in rows]
 
 
-@pytest.mark.slow  # 3 to 5 minutes on the shared 2-core VM (Ray's start, two workers' imports, three grid runs)
+# in `make test` (issue #15 asks for it there): well under a minute on an idle 2-core machine, a few minutes when
+# other jobs hold the cores (Ray's start, two workers' imports, three grid runs)
 def test_ray_grid_equals_sequential_and_recovers(
     data_root: pathlib.Path, local_ray: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture
 ) -> None:
