@@ -464,12 +464,13 @@ def _build_arrays(
     }
 
 
-def _same_spaces(dataset_space: gym.Space, env_space: gym.Space, bounds: bool) -> bool:
+def same_spaces(dataset_space: gym.Space, env_space: gym.Space, bounds: bool) -> bool:
+    """Whether two Box (or Dict of Box) spaces have the same shapes (and keys), and with ``bounds`` the same bounds."""
     if isinstance(dataset_space, gym.spaces.Dict):  # the env's own dict observations: same keys and shapes
         return (
             isinstance(env_space, gym.spaces.Dict)
             and list(env_space.spaces) == list(dataset_space.spaces)
-            and all(_same_spaces(sub, env_space.spaces[k], bounds) for k, sub in dataset_space.spaces.items())
+            and all(same_spaces(sub, env_space.spaces[k], bounds) for k, sub in dataset_space.spaces.items())
         )
     if (
         not isinstance(dataset_space, gym.spaces.Box)
@@ -517,8 +518,8 @@ def load_offline_dataset(
         dataset_obs_space = (
             dict_space if dict_space is not None and isinstance(env.observation_space, gym.spaces.Dict) else observation_space
         )
-        obs_ok = _same_spaces(dataset_obs_space, env.observation_space, bounds=False)
-        act_ok = _same_spaces(action_space, env.action_space, bounds=True)
+        obs_ok = same_spaces(dataset_obs_space, env.observation_space, bounds=False)
+        act_ok = same_spaces(action_space, env.action_space, bounds=True)
         if not (obs_ok and act_ok):
             raise SpaceMismatchError(
                 f"{where} does not match the env: dataset observation space {dict_space or observation_space} vs env "

@@ -23,7 +23,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.checkpoint import DivergenceError, validate_model_file
-from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env, normalized_score
+from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env, normalized_score, same_spaces
 from sb3_pola.common.dict_obs import flatten_env, flatten_observation
 
 SelfOfflineAlgorithm = TypeVar("SelfOfflineAlgorithm", bound="OfflineAlgorithm")
@@ -195,9 +195,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         ours, theirs = self.dict_observation_space, data.dict_observation_space
         same_dict = ours is None and theirs is None
         if ours is not None and theirs is not None:
-            same_dict = list(ours.spaces) == list(theirs.spaces) and all(
-                ours.spaces[k].shape == theirs.spaces[k].shape for k in ours.spaces
-            )
+            same_dict = same_spaces(ours, theirs, bounds=False)
         if not same_dict:
             raise ValueError(
                 f"The dataset's observation space {theirs or data.observation_space} does not match the model's "
