@@ -200,3 +200,27 @@ def test_eta_warmup_from_json() -> None:
     assert isinstance(kwargs["eta"], WarmupSchedule) and kwargs["eta"](0.2) == 2.0 and kwargs["eta"](0.6) == 0.0
     assert kwargs["rollout_length"] == 3 and "eta_warmup" not in kwargs
     assert score.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 0.0})["eta"] == 0.0  # BC stays BC
+
+
+def test_eval_rule_during_training(pendulum_root: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    """--eval-rule stochastic scores with one seeded sample of the chain and leaves training as it was."""
+    import torch as th
+
+    from sb3_pola import POLA
+
+    # folders made before the option existed keep their signature
+    assert score.PRESETS["cpu"].signature() == "cd99bea051" and score.PRESETS["paper"].signature() == "f8a0da1694"
+    base, sampled = tmp_path / "ema", tmp_path / "stochastic"
+    assert run(pendulum_root, base, "--variants", "T1", "--seeds", "0") == 0
+    assert run(pendulum_root, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0
+    assert json.loads((sampled / "config.json").read_text())["eval_rule"] == "stochastic"
+    assert "evaluation rule `stochastic`" in (sampled / "table.md").read_text()
+    name = "test_pendulum-v0__T1__seed0.zip"
+    params = [POLA.load(folder / "models" / name, device="cpu").policy.state_dict() for folder in (base, sampled)]
+    assert all(th.equal(params[0][key], params[1][key]) for key in params[0])  # the evaluation drew no training noise
+    final = score.read_rows(sampled / "scores.csv")[-1]
+    again = {r["rule"]: r for r in score.reevaluate(sampled, ["stochastic", "ema"], 1, "cpu", verbose=0)}
+    assert float(again["stochastic"]["mean_return"]) == pytest.approx(final["mean_return"])
+    assert float(again["ema"]["mean_return"]) == pytest.approx(score.read_rows(base / "scores.csv")[-1]["mean_return"])
+    with pytest.raises(ValueError, match="unknown evaluation rule"):
+        run(pendulum_root, tmp_path / "bad", "--variants", "T1", "--eval-rule", "best")

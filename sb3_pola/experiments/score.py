@@ -125,6 +125,9 @@ class Config:
     :param n_critics: critic ensemble size ``N``
     :param top_k: ``K`` smallest Q-values averaged in the policy loss
     :param n_action_samples: candidate actions per state at evaluation (picked by the critic)
+    :param eval_rule: how the evaluations during training pick actions (:func:`apply_eval_rule`): ``ema``
+        (the default: ``n_action_samples`` noise-free chains of the variant's predict actor), ``stochastic``
+        (one sample of the EMA actor's noisy chain), ...; a rule other than ``ema`` overrides ``n_action_samples``
     :param dynamics_kwargs: arguments of the dynamics ensemble
     :param dynamics_fit_kwargs: arguments of its fit
     :param share_dynamics: fit the dynamics model once per dataset (first seed) and share it across seeds
@@ -146,10 +149,13 @@ class Config:
     share_dynamics: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
     log_interval: int = 500
+    eval_rule: str = "ema"
 
     def signature(self) -> str:
         """Short hash of the fields that decide results (the preset's name and the logging period excluded)."""
         data = {k: v for k, v in asdict(self).items() if k not in ("preset", "log_interval")}
+        if data["eval_rule"] == "ema":  # the rule before it was a field: folders made then keep their signature
+            del data["eval_rule"]
         return hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
 
 
@@ -215,6 +221,7 @@ def build_config(args: argparse.Namespace, device: str) -> Config:
         "top_k": args.top_k,
         "n_action_samples": args.n_action_samples,
         "log_interval": args.log_interval,
+        "eval_rule": args.eval_rule,
     }
     config = replace(config, **{k: v for k, v in overrides.items() if v is not None})
     if args.dynamics_steps is not None:
@@ -228,6 +235,7 @@ def build_config(args: argparse.Namespace, device: str) -> Config:
     if args.compile is not None:
         config.extra = {**config.extra, "compile_update": args.compile}
     config.top_k = min(config.top_k, config.n_critics)
+    parse_eval_rule(config.eval_rule)
     if config.steps < 1 or config.eval_freq < 1 or config.eval_episodes < 1:
         raise ValueError("steps, eval_freq and eval_episodes must be positive")
     return config
@@ -252,14 +260,22 @@ def evaluate(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bo
     :param env: a Gymnasium env (not vectorised)
     :param n_episodes: number of episodes
     :param seed: seed of the first episode's reset; with ``deterministic=False`` it also seeds torch, so the
-        sampled actions repeat
+        sampled actions repeat (the caller's torch RNG state is restored afterwards, so an evaluation during
+        training leaves the training's random stream as it was)
     :param deterministic: ``model.predict``'s flag
     :return: ``[n_episodes]`` undiscounted returns
     """
     import torch as th
 
-    if not deterministic:
+    if deterministic:
+        return _episode_returns(model, env, n_episodes, seed, deterministic)
+    devices = list(range(th.cuda.device_count())) if th.cuda.is_initialized() else []
+    with th.random.fork_rng(devices=devices):
         th.manual_seed(seed)
+        return _episode_returns(model, env, n_episodes, seed, deterministic)
+
+
+def _episode_returns(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool) -> np.ndarray:
     returns = np.zeros(n_episodes)
     for i in range(n_episodes):
         obs, _ = env.reset(seed=seed + i)
@@ -444,6 +460,8 @@ def run_cell(
     if len(kept) != len(all_rows):
         write_rows(csv_path, kept)
     remaining = config.steps - done_steps
+    # the default keeps the variant's actor and the config's n_action_samples; another rule sets both
+    deterministic = True if config.eval_rule == "ema" else apply_eval_rule(model, config.eval_rule)
     env = make_env(model._offline_data if model._offline_data is not None else dataset)
     start = time.perf_counter()
 
@@ -463,7 +481,7 @@ def run_cell(
                     "variant": variant,
                     "seed": seed,
                     "step": step,
-                    **evaluation_scores(model, env, config.eval_episodes, seed),
+                    **evaluation_scores(model, env, config.eval_episodes, seed, deterministic=deterministic),
                     "wall_s": round(previous_wall + time.perf_counter() - start, 1),
                 }
                 append_row(csv_path, row)
@@ -658,7 +676,8 @@ def markdown_table(
     if config:
         lines.append(
             f"Budget: {config.get('steps')} gradient steps per run, evaluation every {config.get('eval_freq')} steps "
-            f"on {config.get('eval_episodes')} episodes (preset `{config.get('preset')}`, device {config.get('device')})."
+            f"on {config.get('eval_episodes')} episodes (preset `{config.get('preset')}`, device {config.get('device')}), "
+            f"evaluation rule `{config.get('eval_rule', 'ema')}`."
         )
         lines.append("")
     if any(is_peer(v) for (_, v) in summary):
@@ -840,6 +859,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--out", default="results/score", help="output folder")
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--log-interval", type=int, help="gradient steps between rows of the training statistics")
+    parser.add_argument(
+        "--eval-rule",
+        metavar="RULE",
+        help="how the evaluations during training act: ema (default: the EMA actor's noise-free chain), online, "
+        "[online-]stochastic (one sample of the noisy chain), [online-]candidates<N>",
+    )
     parser.add_argument(
         "--reevaluate",
         nargs="+",
