@@ -63,3 +63,25 @@ def test_obs_stats_and_read_only(data):
         buffer.extend()
     buffer.reset()
     assert buffer.size() == len(data)
+
+
+def test_model_has_its_buffer_once_built(tiny_dataset: str, tmp_path) -> None:
+    """As in SB3, ``model.replay_buffer`` exists once a model is built with its data, before ``learn``."""
+    from pola_data import light_kwargs
+
+    from sb3_pola.pola import POLA
+
+    model = POLA("MlpPolicy", dataset=tiny_dataset, **light_kwargs())
+    assert isinstance(model.replay_buffer, OfflineReplayBuffer)
+    assert model.replay_buffer.size() == len(model.offline_data)
+    assert model.replay_buffer.dataset_id == "test/tiny-v0"
+    in_memory = POLA("MlpPolicy", dataset=load_offline_dataset(tiny_dataset), **light_kwargs())
+    assert isinstance(in_memory.replay_buffer, OfflineReplayBuffer)
+    buffer = model.replay_buffer
+    model.learn(2)
+    assert model.replay_buffer is buffer  # learn uses the buffer built with the model
+    model.save(tmp_path / "model.zip")
+    # loading without a dataset stays lazy; with one, the buffer is there at once
+    assert POLA.load(tmp_path / "model.zip", device="cpu").replay_buffer is None
+    loaded = POLA.load(tmp_path / "model.zip", dataset=tiny_dataset, device="cpu")
+    assert isinstance(loaded.replay_buffer, OfflineReplayBuffer) and loaded.replay_buffer.size() == buffer.size()

@@ -1,4 +1,4 @@
-"""Crash-safe training: atomic checkpoints carrying the RNG state, exact resume, and the errors of the safety checks.
+"""Crash-safe training: atomic checkpoints carrying the RNG state, and exact resume.
 
 A checkpoint is the SB3 zip written by ``model.save`` (policy with the EMA actor, target critics,
 dynamics model and its ``dynamics_fitted`` flag, both optimizers, ``num_timesteps``, ``_n_updates``,
@@ -6,7 +6,8 @@ dynamics model and its ``dynamics_fitted`` flag, both optimizers, ``num_timestep
 (CPU and CUDA), NumPy and Python RNG states. SB3's ``load`` ignores that member, so a checkpoint is
 also an ordinary model file. Files are written atomically: a temp file in the same folder, fsync,
 ``os.replace``, fsync of the folder; a kill at any moment leaves either the previous checkpoint or
-the new one, never a truncated file. Weights with NaN or inf are never written.
+the new one, never a truncated file. Weights with NaN or inf are never written (:class:`DivergenceError`,
+defined with :class:`ModelFileError` and :func:`validate_model_file` in :mod:`sb3_pola.common.errors`).
 
 Usage::
 
@@ -14,6 +15,7 @@ Usage::
     from sb3_pola.common.checkpoint import CheckpointCallback, learn_with_checkpoints
 
     model = learn_with_checkpoints(
+        POLA,
         lambda: POLA("MlpPolicy", dataset="mujoco/halfcheetah/medium-v0", seed=0),
         total_timesteps=1_000_000,
         save_path="runs/hc",
@@ -37,7 +39,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import os
 import pathlib
 import random
@@ -51,23 +52,13 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import MaybeCallback
 
+from sb3_pola.common.errors import DivergenceError, ModelFileError, validate_model_file
+
 if TYPE_CHECKING:
     from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 
 RNG_MEMBER = "sb3_pola_rng.pt"  # not ".pth": SB3's load reads every ".pth" member as a state_dict
 _FORMAT_VERSION = 1
-
-# Called with the temp file's path after it is fully written and before it replaces the checkpoint.
-# For fault-injection tests only (e.g. sleep there so that a kill lands mid-write).
-before_replace_hook: Callable[[pathlib.Path], None] | None = None
-
-
-class DivergenceError(FloatingPointError):
-    """Training produced NaN or inf in a loss or in the parameters."""
-
-
-class ModelFileError(ValueError):
-    """A model file is missing a part, truncated, corrupt, or not a model of this algorithm."""
 
 
 # --------------------------------------------------------------------------- RNG state
@@ -132,6 +123,10 @@ def _temp_prefix(path: pathlib.Path) -> str:
     return f".{path.name}."
 
 
+def _temp_suffix(path: pathlib.Path) -> str:
+    return f".tmp{path.suffix}"
+
+
 def remove_stale_temp_files(path: str | os.PathLike) -> list[pathlib.Path]:
     """Delete temp files left next to ``path`` by writes that were killed; the checkpoint itself is untouched.
 
@@ -141,18 +136,42 @@ def remove_stale_temp_files(path: str | os.PathLike) -> list[pathlib.Path]:
     path = pathlib.Path(path)
     removed = []
     if path.parent.is_dir():
-        for stale in path.parent.glob(_temp_prefix(path) + "*.tmp.zip"):
+        for stale in path.parent.glob(_temp_prefix(path) + "*" + _temp_suffix(path)):
             with contextlib.suppress(OSError):
                 stale.unlink()
                 removed.append(stale)
     return removed
 
 
-def save_checkpoint(model: OfflineAlgorithm, path: str | os.PathLike, check_finite: bool = True) -> pathlib.Path:
-    """Write ``model`` and the global RNG states to ``path`` atomically.
+def write_atomically(path: str | os.PathLike, write: Callable[[pathlib.Path], None]) -> pathlib.Path:
+    """Call ``write(temp_path)``, flush the temp file to disk, then rename it over ``path``.
 
-    The zip is written to a temp file in the same folder, flushed to disk, then renamed over ``path``:
-    a crash at any point leaves the previous file intact.
+    The temp file is in the same folder (so the rename is atomic): a crash at any point leaves either the
+    previous file or the new one at ``path``, never a partial file.
+
+    :param path: destination
+    :param write: writes the complete file at the path it is given
+    :return: the path written
+    """
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=_temp_suffix(path))
+    os.close(fd)
+    tmp = pathlib.Path(tmp_name)
+    try:
+        write(tmp)
+        with open(tmp, "rb+") as file:
+            os.fsync(file.fileno())
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+    return path
+
+
+def save_checkpoint(model: OfflineAlgorithm, path: str | os.PathLike, check_finite: bool = True) -> pathlib.Path:
+    """Write ``model`` and the global RNG states to ``path`` atomically (:func:`write_atomically`).
 
     :param model: the model
     :param path: destination (``.zip`` is appended if missing)
@@ -163,27 +182,16 @@ def save_checkpoint(model: OfflineAlgorithm, path: str | os.PathLike, check_fini
     if path.suffix != ".zip":
         path = path.with_name(path.name + ".zip")
     if check_finite:
-        model.check_finite(parameters_only=True, action=f"Not saving {path}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=".tmp.zip")
-    os.close(fd)
-    tmp = pathlib.Path(tmp_name)
-    try:
+        model.check_finite(parameters_only=True, consequence=f"Not saving {path}")
+
+    def write(tmp: pathlib.Path) -> None:
         model.save(tmp, check_finite=False)
         buffer = io.BytesIO()
         th.save({"format": _FORMAT_VERSION, "num_timesteps": model.num_timesteps, "rng": get_rng_state()}, buffer)
         with zipfile.ZipFile(tmp, mode="a") as archive:
             archive.writestr(RNG_MEMBER, buffer.getvalue())
-        with open(tmp, "rb+") as file:
-            os.fsync(file.fileno())
-        if before_replace_hook is not None:
-            before_replace_hook(tmp)
-        os.replace(tmp, path)
-        _fsync_dir(path.parent)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-    return path
+
+    return write_atomically(path, write)
 
 
 def read_rng_state(path: str | os.PathLike) -> dict[str, Any] | None:
@@ -221,6 +229,31 @@ def load_checkpoint(
         if state is not None:
             set_rng_state(state)
     return model
+
+
+# --------------------------------------------------------------------------- a part shared between runs
+
+
+def save_module_state(module: th.nn.Module, path: str | os.PathLike) -> pathlib.Path:
+    """Write ``module.state_dict()`` to ``path`` atomically (e.g. a fitted dynamics model that other runs reuse).
+
+    :param module: the module
+    :param path: destination (a ``torch.save`` file)
+    :return: the path written
+    """
+    return write_atomically(path, lambda tmp: th.save(module.state_dict(), tmp))
+
+
+def load_module_state(module: th.nn.Module, path: str | os.PathLike, device: th.device | str = "cpu") -> th.nn.Module:
+    """Load a state dict written by :func:`save_module_state` into ``module``.
+
+    :param module: the module, of the same architecture
+    :param path: the file
+    :param device: where the tensors are mapped to
+    :return: ``module``
+    """
+    module.load_state_dict(th.load(path, map_location=device, weights_only=True))
+    return module
 
 
 # --------------------------------------------------------------------------- callback and entry point
@@ -279,7 +312,7 @@ class CheckpointCallback(BaseCallback):
         """Write the checkpoint now (after the finite check) and return its path."""
         model: OfflineAlgorithm = self.model  # type: ignore[assignment]
         kept = f"Not saving; the last good checkpoint {self.latest_path} (step {self.last_saved_step}) is kept"
-        model.check_finite(action=kept)
+        model.check_finite(consequence=kept)
         path = save_checkpoint(model, self.latest_path, check_finite=False)
         if self.keep_history:
             save_checkpoint(model, self.save_path / f"{self.name_prefix}_{self.num_timesteps}_steps.zip", check_finite=False)
@@ -305,13 +338,35 @@ def latest_checkpoint_path(save_path: str | os.PathLike, name_prefix: str = "pol
     return pathlib.Path(save_path) / f"{name_prefix}_latest.zip"
 
 
+def load_or_make(
+    algorithm_class: type[OfflineAlgorithm],
+    path: str | os.PathLike,
+    make_model: Callable[[], OfflineAlgorithm],
+    **load_kwargs: Any,
+) -> OfflineAlgorithm:
+    """Resume from the checkpoint at ``path`` (:func:`load_checkpoint`) if there is one, else ``make_model()``.
+
+    Temp files left next to ``path`` by a killed write are removed first.
+
+    :param algorithm_class: class to load the checkpoint with (e.g. ``POLA``)
+    :param path: checkpoint path
+    :param make_model: builds a fresh (seeded) model when there is no checkpoint
+    :param load_kwargs: arguments of ``load`` (``dataset=``, ``env=``, ``device=``, ...)
+    :return: the model; ``model.num_timesteps`` is the step it continues from (0 for a fresh one)
+    """
+    remove_stale_temp_files(path)
+    if pathlib.Path(path).is_file():
+        return load_checkpoint(algorithm_class, path, **load_kwargs)
+    return make_model()
+
+
 def learn_with_checkpoints(
+    algorithm_class: type[OfflineAlgorithm],
     make_model: Callable[[], OfflineAlgorithm],
     total_timesteps: int,
     save_path: str | os.PathLike,
     save_freq: int = 10_000,
     name_prefix: str = "pola",
-    algorithm_class: type[OfflineAlgorithm] | None = None,
     load_kwargs: dict[str, Any] | None = None,
     callback: MaybeCallback = None,
     **learn_kwargs: Any,
@@ -321,30 +376,21 @@ def learn_with_checkpoints(
     Start, kill and re-run this as often as needed: every run continues where the last checkpoint
     left off, and the final parameters are those of one uninterrupted run.
 
+    :param algorithm_class: class to load a checkpoint with (e.g. ``POLA``)
     :param make_model: builds a fresh (seeded) model when there is no checkpoint
     :param total_timesteps: gradient steps of the whole run (not of this call)
     :param save_path: checkpoint folder
     :param save_freq: gradient steps between checkpoints
     :param name_prefix: checkpoint file prefix
-    :param algorithm_class: class to load a checkpoint with (``POLA`` if ``None``)
     :param load_kwargs: arguments of ``load`` on resume (``dataset=``, ``env=``, ``device=``, ...)
     :param callback: more callbacks, run after the checkpoint callback
     :param learn_kwargs: passed to ``learn`` (``log_interval``, ``progress_bar``, ...)
     :return: the trained model
     """
     latest = latest_checkpoint_path(save_path, name_prefix)
-    remove_stale_temp_files(latest)
-    if latest.is_file():
-        if algorithm_class is None:
-            from sb3_pola.pola.pola import POLA
-
-            algorithm_class = POLA
-        model = load_checkpoint(algorithm_class, latest, **(load_kwargs or {}))
-        remaining = total_timesteps - model.num_timesteps
-        reset = False
-    else:
-        model = make_model()
-        remaining, reset = total_timesteps, True
+    resumed = latest.is_file()
+    model = load_or_make(algorithm_class, latest, make_model, **(load_kwargs or {}))
+    remaining, reset = (total_timesteps - model.num_timesteps, False) if resumed else (total_timesteps, True)
     checkpoint = CheckpointCallback(save_freq, save_path, name_prefix)
     checkpoint.last_saved_step = model.num_timesteps if not reset else None
     callbacks: list[BaseCallback] = [checkpoint]
@@ -362,84 +408,6 @@ def learn_with_checkpoints(
     return model
 
 
-# --------------------------------------------------------------------------- validating a model file
-
-
-def _ends_with_zip_directory(path: pathlib.Path, size: int) -> bool:
-    """Whether the file ends with a zip end-of-central-directory record (and its comment), as a complete zip does."""
-    tail_size = min(size, 22 + 65535)
-    with open(path, "rb") as file:
-        file.seek(size - tail_size)
-        tail = file.read(tail_size)
-    position = tail.rfind(b"PK\x05\x06")
-    while position >= 0:
-        if position + 22 <= len(tail):
-            comment_length = int.from_bytes(tail[position + 20 : position + 22], "little")
-            if position + 22 + comment_length == len(tail):
-                return True
-        position = tail.rfind(b"PK\x05\x06", 0, position)
-    return False
-
-
-def validate_model_file(path: str | os.PathLike, policy_classes: tuple[type, ...] = (), algorithm_name: str = "") -> dict:
-    """Check that ``path`` is a complete SB3 model file of the expected kind, before ``load`` touches it.
-
-    :param path: the file (``.zip`` may be omitted, as with SB3's ``load``)
-    :param policy_classes: accepted policy classes (empty: any)
-    :param algorithm_name: name used in the messages
-    :return: the saved ``data`` (class parameters)
-    :raises FileNotFoundError: no such file
-    :raises ModelFileError: truncated, corrupt, or not a model of this algorithm
-    """
-    from stable_baselines3.common.save_util import json_to_data
-
-    path = pathlib.Path(path)
-    candidates = [path] if path.suffix == ".zip" else [path, path.with_name(path.name + ".zip")]
-    found = next((p for p in candidates if p.is_file()), None)
-    if found is None:
-        raise FileNotFoundError(f"No model file at {' or '.join(map(str, candidates))}")
-    what = f"{algorithm_name} model file" if algorithm_name else "model file"
-    size = found.stat().st_size
-    if not _ends_with_zip_directory(found, size):
-        # checked first: a truncated model file can still open as a zip, found inside it (policy.pth is itself a zip)
-        raise ModelFileError(
-            f"{found} is not a valid {what}: truncated or corrupt zip ({size} bytes; no zip directory at its end)"
-        )
-    try:
-        with zipfile.ZipFile(found) as archive:
-            names = archive.namelist()
-            missing = [name for name in ("data", "policy.pth") if name not in names]
-            if missing:
-                raise ModelFileError(
-                    f"{found} is a zip file but not a saved {what}: it has no {', '.join(missing)} "
-                    f"(members: {', '.join(names[:8]) or 'none'})"
-                )
-            bad_member = archive.testzip()  # reads every member and checks its CRC
-            if bad_member is not None:
-                raise ModelFileError(f"{found} is corrupt: member {bad_member!r} fails its CRC check")
-            raw = archive.read("data").decode()
-    except zipfile.BadZipFile as error:
-        raise ModelFileError(f"{found} is not a valid {what}: truncated or corrupt zip ({size} bytes; {error})") from error
-    except (EOFError, OSError) as error:  # OSError covers zlib errors of damaged members
-        raise ModelFileError(f"{found} is not a valid {what}: unreadable ({error})") from error
-    try:
-        json.loads(raw)
-        data = json_to_data(raw)
-    except Exception as error:  # a damaged/foreign "data" member: invalid JSON or an unpicklable entry
-        raise ModelFileError(f"{found} is not a valid {what}: its 'data' member cannot be read ({error!r})") from error
-    if "observation_space" not in data or "action_space" not in data or "policy_class" not in data:
-        raise ModelFileError(f"{found} is not a valid {what}: its data has no spaces or policy class")
-    policy_class = data["policy_class"]
-    if policy_classes and not (isinstance(policy_class, type) and issubclass(policy_class, policy_classes)):
-        name = getattr(policy_class, "__qualname__", repr(policy_class))
-        expected = ", ".join(c.__name__ for c in policy_classes)
-        raise ModelFileError(
-            f"{found} holds a model with policy {name}, not a {algorithm_name or 'model'} model (policy {expected}); "
-            "load it with the algorithm class that saved it"
-        )
-    return data
-
-
 __all__ = [
     "RNG_MEMBER",
     "CheckpointCallback",
@@ -449,9 +417,13 @@ __all__ = [
     "latest_checkpoint_path",
     "learn_with_checkpoints",
     "load_checkpoint",
+    "load_module_state",
+    "load_or_make",
     "read_rng_state",
     "remove_stale_temp_files",
     "save_checkpoint",
+    "save_module_state",
     "set_rng_state",
     "validate_model_file",
+    "write_atomically",
 ]

@@ -8,7 +8,7 @@ Dict observations (``Dict`` of ``Box``) are flattened in the space's key order (
 :mod:`sb3_pola.common.dict_obs`); the dataset keeps the original space, and ``make_env`` flattens the
 env's observations the same way.
 
-Reading a Minari dataset costs ~2 ms per episode, so the concatenated arrays are cached on disk
+Reading a Minari dataset goes episode by episode, so the concatenated arrays are cached on disk
 (one folder of ``.npy`` files per dataset, keyed by the dataset id, its size and a fingerprint of its files and
 metadata, so a changed dataset never gets stale arrays).
 """
@@ -25,14 +25,21 @@ import shutil
 import tempfile
 import warnings
 import zlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 import gymnasium as gym
 import numpy as np
 
 from sb3_pola.common.dict_obs import check_dict_space, flat_space, flatten_env, flatten_episode_observations
+from sb3_pola.common.scores import normalized_score
+
+if TYPE_CHECKING:
+    from minari import MinariDataset
+
+# a dataset on disk: a Minari id, a dataset folder (``os.PathLike`` or a path string) or a ``minari.MinariDataset``
+DatasetLocation: TypeAlias = "str | os.PathLike[str] | MinariDataset"
 
 # Bump when the cached arrays change meaning: old caches are then never read.
 CACHE_VERSION = 2
@@ -41,8 +48,6 @@ CACHE_MANIFEST = "manifest.json"
 _ARRAY_FIELDS = ("observations", "actions", "rewards", "next_observations", "dones", "episode_returns")
 # Rows per chunk when computing statistics, so no full-size float64 temporary is made.
 _STATS_CHUNK = 65536
-
-_warned_no_ref: set[str | None] = set()
 
 
 class DatasetError(ValueError):
@@ -74,24 +79,6 @@ def default_cache_dir() -> pathlib.Path:
         return pathlib.Path(os.environ["SB3_POLA_CACHE_DIR"])
     xdg = os.environ.get("XDG_CACHE_HOME")
     return (pathlib.Path(xdg) if xdg else pathlib.Path.home() / ".cache") / "sb3_pola"
-
-
-def normalized_score(returns: Any, ref_min: float | None, ref_max: float | None) -> float | None:
-    """D4RL normalised score ``100 * (R - ref_min) / (ref_max - ref_min)`` of the mean return.
-
-    :param returns: one return or several (their mean is scored)
-    :param ref_min: return of a random policy
-    :param ref_max: return of an expert policy
-    :return: the score, or None (with a one-time warning) when a reference score is missing
-    """
-    if ref_min is None or ref_max is None or ref_max == ref_min:
-        key = f"{ref_min}/{ref_max}"
-        if key not in _warned_no_ref:
-            _warned_no_ref.add(key)
-            warnings.warn(f"No usable reference scores (ref_min={ref_min}, ref_max={ref_max}): normalised score is None")
-        return None
-    mean_return = float(np.mean(np.asarray(returns, dtype=np.float64)))
-    return 100.0 * (mean_return - ref_min) / (ref_max - ref_min)
 
 
 @dataclass
@@ -157,18 +144,13 @@ class OfflineDataset:
         std = np.maximum(np.sqrt(sq / n), eps)
         return mean.astype(np.float32), std.astype(np.float32)
 
-    def normalized_score(self, returns: Any) -> float | None:
+    def normalized_score(self, returns: float | Sequence[float] | np.ndarray) -> float | None:
         """Normalised score (D4RL, x100) of the mean of ``returns`` with this dataset's reference scores.
 
         :param returns: episode return(s)
         :return: the score, or None (warned once) when the dataset has no reference scores
         """
-        if self.ref_min_score is None or self.ref_max_score is None:
-            if self.dataset_id not in _warned_no_ref:
-                _warned_no_ref.add(self.dataset_id)
-                warnings.warn(f"Dataset {self.dataset_id!r} has no ref_min_score/ref_max_score: normalised score is None")
-            return None
-        return normalized_score(returns, self.ref_min_score, self.ref_max_score)
+        return normalized_score(returns, self.ref_min_score, self.ref_max_score, source=f"Dataset {self.dataset_id!r}")
 
     def rescale_action(self, action: np.ndarray) -> np.ndarray:
         """Map env actions to [-1, 1] (what the arrays hold)."""
@@ -224,7 +206,7 @@ def _find_dataset_id(dataset_id: str) -> pathlib.Path | None:
     return None
 
 
-def resolve_dataset_path(dataset: Any, download: bool = False) -> pathlib.Path:
+def resolve_dataset_path(dataset: DatasetLocation, download: bool = False) -> pathlib.Path:
     """The ``data`` folder of a dataset given by id, path or ``MinariDataset``.
 
     :param dataset: Minari id, local folder, or ``minari.MinariDataset``
@@ -484,7 +466,7 @@ def same_spaces(dataset_space: gym.Space, env_space: gym.Space, bounds: bool) ->
 
 
 def load_offline_dataset(
-    dataset: str | os.PathLike | Any,
+    dataset: DatasetLocation,
     *,
     env: gym.Env | None = None,
     download: bool = False,

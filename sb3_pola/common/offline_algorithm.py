@@ -22,9 +22,10 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
-from sb3_pola.common.checkpoint import DivergenceError, validate_model_file
-from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env, normalized_score, same_spaces
+from sb3_pola.common.datasets import DatasetLocation, OfflineDataset, load_offline_dataset, make_env, same_spaces
 from sb3_pola.common.dict_obs import flatten_env, flatten_observation
+from sb3_pola.common.errors import DivergenceError, validate_model_file
+from sb3_pola.common.scores import normalized_score
 
 SelfOfflineAlgorithm = TypeVar("SelfOfflineAlgorithm", bound="OfflineAlgorithm")
 
@@ -37,7 +38,7 @@ class OfflineProgressBarCallback(ProgressBarCallback):
         return True
 
 
-def dataset_reference(dataset: Any) -> str | None:
+def dataset_reference(dataset: DatasetLocation | OfflineDataset | None) -> str | None:
     """What is saved with a model to find its dataset again: a Minari id or a path (never the data itself)."""
     if dataset is None or isinstance(dataset, str):
         return dataset
@@ -72,15 +73,20 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
     :param seed: random seed
     :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
     :param supported_action_spaces: action spaces the algorithm supports
+    :param check_finite_freq: gradient steps between two NaN/inf checks of the losses and parameters (one host
+        sync each; also checked at every log dump and at the end of ``learn``); ``1`` finds the exact step of a
+        divergence, ``0`` checks only at dumps and at the end
     """
 
+    # the dataset as a buffer: built with the model when a dataset is given, at the first ``learn`` after a
+    # ``load`` without one
     replay_buffer: OfflineReplayBuffer | None  # type: ignore[assignment]
 
     def __init__(
         self,
         policy: str | type[BasePolicy],
         env: GymEnv | str | None,
-        dataset: Any,
+        dataset: DatasetLocation | OfflineDataset | None,
         learning_rate: float | Schedule,
         batch_size: int = 256,
         tau: float = 0.005,
@@ -92,7 +98,10 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         seed: int | None = None,
         device: str = "auto",
         supported_action_spaces: tuple[type[spaces.Space], ...] | None = (spaces.Box,),
+        check_finite_freq: int = 100,
     ) -> None:
+        if check_finite_freq < 0:
+            raise ValueError(f"check_finite_freq must be >= 0, got {check_finite_freq}")
         data: OfflineDataset | None = None
         if isinstance(env, str):  # made here rather than by SB3, so that dict observations can be flattened
             env = gym.make(env)
@@ -136,8 +145,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         self.dict_observation_space: spaces.Dict | None = data.dict_observation_space if data is not None else None
         if self.dict_observation_space is None and env_dict_space is not None:
             self.dict_observation_space = env_dict_space
-        # gradient steps between two NaN/inf checks of losses and parameters (also done at every log dump)
-        self.check_finite_freq = 100
+        self.check_finite_freq = check_finite_freq
         self._last_finite_step = 0
         self.env_id: str | None = None
         self.ref_min_score: float | None = None
@@ -151,6 +159,13 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         if self.env_id is None and self.env is not None:
             spec = self.env.get_attr("spec")[0]
             self.env_id = getattr(spec, "id", None)
+        if data is not None:
+            self._setup_offline_data()
+
+    @property
+    def offline_data(self) -> OfflineDataset | None:
+        """The dataset's arrays and metadata (``None`` for a model loaded without ``dataset=`` until it learns)."""
+        return self._offline_data
 
     @staticmethod
     def _env_from_dataset(data: OfflineDataset, verbose: int) -> GymEnv | None:
@@ -164,11 +179,11 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_offline_data", "_stat_sums", "_stat_count"]
 
-    def save_replay_buffer(self, path: Any) -> None:
+    def save_replay_buffer(self, path: str | pathlib.Path | io.BufferedIOBase) -> None:
         """Nothing to save: the replay buffer is the dataset, found again through ``self.dataset``."""
         warnings.warn("save_replay_buffer: an offline algorithm's buffer is its dataset; nothing was saved.")
 
-    def load_replay_buffer(self, path: Any, truncate_last_traj: bool = True) -> None:
+    def load_replay_buffer(self, path: str | pathlib.Path | io.BufferedIOBase, truncate_last_traj: bool = True) -> None:
         """Offline algorithms read their buffer from the dataset (see ``save_replay_buffer``)."""
         raise NotImplementedError("An offline algorithm's replay buffer is its dataset: pass `dataset=` instead.")
 
@@ -288,14 +303,14 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         callback.on_training_end()
         return self
 
-    def check_finite(self, parameters_only: bool = False, action: str = "Training stopped") -> None:
-        """Raise :class:`~sb3_pola.common.checkpoint.DivergenceError` if a parameter or a loss is NaN or inf.
+    def check_finite(self, parameters_only: bool = False, consequence: str = "Training stopped") -> None:
+        """Raise :class:`~sb3_pola.common.errors.DivergenceError` if a parameter or a loss is NaN or inf.
 
         The losses checked are the training statistics accumulated since the last log dump, so a loss
         that was non-finite at any step since then is caught. All tensors are checked with one host sync.
 
         :param parameters_only: check the parameters (and buffers) only, not the accumulated losses
-        :param action: what is done instead, for the message
+        :param consequence: what the error stops (e.g. ``"Not saving model.zip"``), a sentence of the message
         """
         named: list[tuple[str, str, th.Tensor]] = []
         if not parameters_only:
@@ -317,7 +332,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
                 parts.append(f"{kind} " + ", ".join(bad[:4]) + (f" (+{len(bad) - 4} more)" if len(bad) > 4 else ""))
         raise DivergenceError(
             f"Training diverged: NaN or inf in {'; '.join(parts)} at gradient step {self.num_timesteps} (first non-finite "
-            f"after step {self._last_finite_step}, when all were last found finite). {action}. Try a lower learning "
+            f"after step {self._last_finite_step}, when all were last found finite). {consequence}. Try a lower learning "
             "rate or max_grad_norm, and check the dataset for NaN/inf; set check_finite_freq=1 to find the exact step."
         )
 
@@ -333,11 +348,13 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         :param path: file path or file object
         :param exclude: attributes not to save
         :param include: attributes to save even if excluded by default
-        :param check_finite: raise :class:`~sb3_pola.common.checkpoint.DivergenceError` instead of saving
+        :param check_finite: raise :class:`~sb3_pola.common.errors.DivergenceError` instead of saving
             non-finite parameters (``False`` saves them anyway, e.g. for debugging)
         """
         if check_finite:
-            self.check_finite(parameters_only=True, action=f"Not saving {path} (pass check_finite=False to save it anyway)")
+            self.check_finite(
+                parameters_only=True, consequence=f"Not saving {path} (pass check_finite=False to save it anyway)"
+            )
         super().save(path, exclude=exclude, include=include)
 
     @classmethod
@@ -359,9 +376,9 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         :param custom_objects: objects replacing saved ones (SB3)
         :param print_system_info: print the saving and current system info
         :param force_reset: reset the env before training (SB3)
-        :param kwargs: attributes to change, e.g. ``dataset=`` to continue training
+        :param kwargs: attributes to change, e.g. ``dataset=`` to continue training (its replay buffer is built now)
         :raises FileNotFoundError: no such file
-        :raises ~sb3_pola.common.checkpoint.ModelFileError: truncated, corrupt, or saved by another algorithm
+        :raises ~sb3_pola.common.errors.ModelFileError: truncated, corrupt, or saved by another algorithm
         :raises ValueError: ``env`` has other spaces than the model
         """
         if isinstance(path, str | os.PathLike):
@@ -382,7 +399,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
                     )
             if env is not None:
                 env = flatten_env(env)
-        return super().load(  # type: ignore[return-value]
+        model = super().load(
             path,
             env=env,
             device=device,
@@ -391,6 +408,9 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
             force_reset=force_reset,
             **kwargs,
         )
+        if kwargs.get("dataset") is not None:
+            model._setup_offline_data()
+        return model  # type: ignore[return-value]
 
     def predict(
         self,

@@ -1,8 +1,9 @@
 """One d3rlpy baseline cell of ``sb3-pola peers``, run by the peers venv's Python (d3rlpy 2.8.1, gymnasium 1.0).
 
 This file is a script, not part of the package's import graph: it imports only the standard
-library, numpy, gymnasium, torch and d3rlpy (never ``sb3_pola``), so the separate virtual
-environment that holds d3rlpy can run it directly::
+library, numpy, gymnasium, torch and d3rlpy (never ``sb3_pola``; the normalised score comes from
+``sb3_pola/common/scores.py``, loaded by its path), so the separate virtual environment that holds d3rlpy
+can run it directly::
 
     .venv-peers/bin/python peers_worker.py --npz data.npz --algo td3bc --seed 0 --steps 10000 \\
         --eval-freq 2000 --eval-episodes 10 --csv out/peers.csv --dataset halfcheetah/medium-v0
@@ -37,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import importlib.util
 import io
 import json
 import os
@@ -285,11 +287,18 @@ def evaluate(algo: Any, env: Any, n_episodes: int, seed: int, low: np.ndarray, h
     return returns
 
 
-def normalized_scores(returns: np.ndarray, ref_min: float | None, ref_max: float | None) -> np.ndarray:
-    """Per-episode D4RL scores ``100 (R - ref_min) / (ref_max - ref_min)`` (NaN without reference scores)."""
-    if ref_min is None or ref_max is None or ref_max == ref_min:
-        return np.full(len(returns), np.nan)
-    return 100.0 * (np.asarray(returns, dtype=np.float64) - ref_min) / (ref_max - ref_min)
+def _load_scores_module() -> Any:
+    """``sb3_pola/common/scores.py`` (NumPy only), loaded by its path: this venv cannot import ``sb3_pola`` itself."""
+    path = pathlib.Path(__file__).resolve().parents[1] / "common" / "scores.py"
+    spec = importlib.util.spec_from_file_location("_sb3_pola_scores", path)
+    assert spec is not None and spec.loader is not None, f"no {path}"
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+# per-episode D4RL scores (NaN without reference scores): the package's one implementation
+normalized_scores = _load_scores_module().normalized_scores
 
 
 def eval_row(

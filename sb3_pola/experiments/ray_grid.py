@@ -20,6 +20,7 @@ import os
 import pathlib
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict
 from typing import Any
 
@@ -156,6 +157,67 @@ def _error_text(error: BaseException) -> str:
     return f"{type(error).__name__}: {error}"
 
 
+def _submit_cells(
+    submit: Callable[..., Any], todo: list[Cell], config: score.Config, out: pathlib.Path
+) -> tuple[dict[Any, str], int]:
+    """Start the dynamics-fit tasks, then every cell, each after the fit of the dynamics model it uses.
+
+    :param submit: starts a :func:`cell_task` of ``(name, cell, stop_after_dynamics, *tasks_to_wait_for)``
+    :param todo: the cells to run, in the sequential run's order
+    :param config: the grid's configuration
+    :param out: output folder
+    :return: the tasks (object ref -> name), and how many of them are dynamics fits
+    """
+    pending: dict[Any, str] = {}
+    fits: dict[pathlib.Path, Any] = {}
+    for path, cell in plan_dynamics_fits(todo, config, out).items():
+        name = f"{score.cell_name(*cell)} (dynamics fit)"
+        fits[path] = submit(name, cell, True)
+        pending[fits[path]] = name
+    for cell in todo:
+        name = score.cell_name(*cell)
+        fit = fits.get(score.dynamics_path(out, cell[0], cell[2], config))
+        after = [fit] if fit is not None and score.needs_dynamics(cell[1], config) else []
+        pending[submit(name, cell, False, *after)] = name
+    return pending, len(fits)
+
+
+def _wait_for_cells(
+    pending: dict[Any, str], cells: list[Cell], out: pathlib.Path, variants: list[str], info: dict[str, Any]
+) -> list[tuple[str, BaseException]]:
+    """Wait for every task, merging the rows into ``scores.csv`` as they come and rewriting the reports now and then.
+
+    :param pending: the tasks (object ref -> name); emptied
+    :param cells: the grid, in the sequential run's order
+    :param out: output folder
+    :param variants: the variants of the reports
+    :param info: the content of ``config.json``
+    :return: the failed tasks' names and errors
+    """
+    import ray
+
+    failures: list[tuple[str, BaseException]] = []
+    last_merge = last_report = time.monotonic()
+    while pending:
+        done, _ = ray.wait(list(pending), num_returns=1, timeout=MERGE_INTERVAL)
+        for ref in done:
+            name = pending.pop(ref)
+            try:
+                ray.get(ref)
+            except Exception as error:  # the cell's exception, or a worker lost more often than retried
+                failures.append((name, error))
+                print(f"[score] {name} failed:\n{_error_text(error)}", file=sys.stderr)
+        now = time.monotonic()
+        if now - last_merge >= MERGE_INTERVAL or done:
+            collect_rows(out, cells)
+            last_merge = now
+        if now - last_report >= REPORT_INTERVAL and pending:
+            score.write_reports(out, variants, info)
+            write_diagnostics(out)
+            last_report = now
+    return failures
+
+
 def run_grid(
     args: argparse.Namespace,
     cells: list[Cell],
@@ -196,42 +258,18 @@ def run_grid(
         ray.init(include_dashboard=False, log_to_driver=args.verbose > 0)
     elif started:
         ray.init(address=args.ray, log_to_driver=args.verbose > 0)
-    failures: list[tuple[str, BaseException]] = []
     try:
         remote = ray.remote(cell_task)
         resources = dict(num_cpus=args.cpus_per_cell, num_gpus=args.gpus_per_cell, max_retries=args.max_retries)
         common = (asdict(config), str(out.resolve()), device, threads, args.verbose)
-        pending: dict[Any, str] = {}
-        fits: dict[pathlib.Path, Any] = {}
-        for path, cell in plan_dynamics_fits(todo, config, out).items():
-            name = f"{score.cell_name(*cell)} (dynamics fit)"
-            fits[path] = remote.options(name=name, **resources).remote(cell, *common, True, environ)
-            pending[fits[path]] = name
-        for cell in todo:
-            name = score.cell_name(*cell)
-            fit = fits.get(score.dynamics_path(out, cell[0], cell[2], config))
-            after = [fit] if fit is not None and score.needs_dynamics(cell[1], config) else []
-            pending[remote.options(name=name, **resources).remote(cell, *common, False, environ, *after)] = name
+
+        def submit(name: str, cell: Cell, stop_after_dynamics: bool, *after: Any) -> Any:
+            return remote.options(name=name, **resources).remote(cell, *common, stop_after_dynamics, environ, *after)
+
+        pending, n_fits = _submit_cells(submit, todo, config, out)
         cpus = ray.cluster_resources().get("CPU", 0)
-        print(f"[score] {len(todo)} cells on Ray ({cpus:.0f} CPUs), {len(fits)} dynamics fits")
-        last_merge = last_report = time.monotonic()
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1, timeout=MERGE_INTERVAL)
-            for ref in done:
-                name = pending.pop(ref)
-                try:
-                    ray.get(ref)
-                except Exception as error:  # the cell's exception, or a worker lost more often than retried
-                    failures.append((name, error))
-                    print(f"[score] {name} failed:\n{_error_text(error)}", file=sys.stderr)
-            now = time.monotonic()
-            if now - last_merge >= MERGE_INTERVAL or done:
-                collect_rows(out, cells)
-                last_merge = now
-            if now - last_report >= REPORT_INTERVAL and pending:
-                score.write_reports(out, args.variants, info)
-                write_diagnostics(out)
-                last_report = now
+        print(f"[score] {len(todo)} cells on Ray ({cpus:.0f} CPUs), {n_fits} dynamics fits")
+        failures = _wait_for_cells(pending, cells, out, args.variants, info)
     finally:
         if started:
             ray.shutdown()

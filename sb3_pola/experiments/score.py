@@ -161,7 +161,7 @@ class Config:
 
 PRESETS: dict[str, Config] = {
     # a CPU core per cell: light nets, small ensemble, the main job's dynamics model, a short budget, the
-    # compiled update (the T = 3 step is about 1.8x faster compiled; the first step compiles for minutes)
+    # compiled update (faster per step for the look-ahead variants; the first step compiles for minutes)
     "cpu": Config(
         preset="cpu",
         steps=10_000,
@@ -380,6 +380,34 @@ def needs_dynamics(variant: str, config: Config) -> bool:
     return int(pola_kwargs({**config.extra, **VARIANTS[variant][1]}).get("rollout_length", default)) > 0
 
 
+def new_cell_model(variant: str, seed: int, config: Config, dataset: str, device: str) -> Any:
+    """A fresh POLA model of a cell: the variant's arguments over the config's.
+
+    :param variant: a key of :data:`VARIANTS`
+    :param seed: random seed
+    :param config: budget and hyperparameters
+    :param dataset: Minari dataset id
+    :param device: torch device
+    :return: the model
+    """
+    from sb3_pola.pola import POLA
+
+    _, kwargs, policy_kwargs = VARIANTS[variant]
+    return POLA(
+        "MlpPolicy",
+        dataset=dataset,
+        batch_size=config.batch_size,
+        n_critics=config.n_critics,
+        top_k=config.top_k,
+        dynamics_kwargs=config.dynamics_kwargs,
+        dynamics_fit_kwargs=config.dynamics_fit_kwargs,
+        policy_kwargs={"net_arch": config.net_arch, "n_action_samples": config.n_action_samples, **policy_kwargs},
+        seed=seed,
+        device=device,
+        **pola_kwargs({**config.extra, **kwargs}),
+    )
+
+
 def run_cell(
     dataset: str,
     variant: str,
@@ -410,48 +438,33 @@ def run_cell(
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from sb3_pola.common.checkpoint import load_checkpoint, remove_stale_temp_files, save_checkpoint
+    from sb3_pola.common.checkpoint import load_module_state, load_or_make, save_checkpoint, save_module_state
     from sb3_pola.common.datasets import make_env
     from sb3_pola.pola import POLA
 
-    _, kwargs, policy_kwargs = VARIANTS[variant]
     name = cell_name(dataset, variant, seed)
     csv_path, ckpt = rows_csv or out / "scores.csv", out / "ckpt" / f"{name}.zip"
     ckpt.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temp_files(ckpt)
     dyn_path = dynamics_path(out, dataset, seed, config)
     dyn_path.parent.mkdir(parents=True, exist_ok=True)
+
+    def make_model() -> POLA:
+        model = new_cell_model(variant, seed, config, dataset, device)
+        dynamics = model.policy.dynamics
+        if dynamics is not None and dyn_path.exists():  # fitted by another cell of this dataset
+            load_module_state(dynamics, dyn_path, device)
+            dynamics.freeze()
+            model.policy.dynamics_fitted.fill_(True)
+        return model
+
+    model = cast(POLA, load_or_make(POLA, ckpt, make_model, dataset=dataset, device=device))
+    done_steps = model.num_timesteps
     previous_wall = 0.0
-    rows = [r for r in read_rows(csv_path) if (r["dataset"], r["variant"], r["seed"]) == (dataset, variant, seed)]
-    if ckpt.exists():
-        model = cast(POLA, load_checkpoint(POLA, ckpt, dataset=dataset, device=device))
-        done_steps = model.num_timesteps
-        if rows:
-            previous_wall = max((r["wall_s"] for r in rows if r["step"] <= done_steps), default=0.0)
+    if done_steps > 0:
+        rows = [r for r in read_rows(csv_path) if (r["dataset"], r["variant"], r["seed"]) == (dataset, variant, seed)]
+        previous_wall = max((r["wall_s"] for r in rows if r["step"] <= done_steps), default=0.0)
         if verbose:
             print(f"[score] {name}: resuming from step {done_steps}")
-    else:
-        model = POLA(
-            "MlpPolicy",
-            dataset=dataset,
-            batch_size=config.batch_size,
-            n_critics=config.n_critics,
-            top_k=config.top_k,
-            dynamics_kwargs=config.dynamics_kwargs,
-            dynamics_fit_kwargs=config.dynamics_fit_kwargs,
-            policy_kwargs={"net_arch": config.net_arch, "n_action_samples": config.n_action_samples, **policy_kwargs},
-            seed=seed,
-            device=device,
-            **pola_kwargs({**config.extra, **kwargs}),
-        )
-        done_steps = 0
-        dynamics = model.policy.dynamics
-        if dynamics is not None and dyn_path.exists():
-            import torch as th
-
-            dynamics.load_state_dict(th.load(dyn_path, map_location=device))
-            dynamics.requires_grad_(False).eval()  # as EnsembleDynamics.freeze
-            cast(th.Tensor, model.policy.dynamics_fitted).fill_(True)
     # drop evaluations made after the checkpoint (an interruption between an evaluation and its checkpoint)
     all_rows = read_rows(csv_path)
     kept = [
@@ -462,7 +475,7 @@ def run_cell(
     remaining = config.steps - done_steps
     # the default keeps the variant's actor and the config's n_action_samples; another rule sets both
     deterministic = True if config.eval_rule == "ema" else apply_eval_rule(model, config.eval_rule)
-    env = make_env(model._offline_data if model._offline_data is not None else dataset)
+    env = make_env(model.offline_data if model.offline_data is not None else dataset)
     start = time.perf_counter()
 
     class ScoreCallback(BaseCallback):
@@ -471,9 +484,7 @@ def run_cell(
         def _on_step(self) -> bool:
             dynamics = model.policy.dynamics
             if dynamics is not None and not dyn_path.exists() and bool(model.policy.dynamics_fitted):
-                import torch as th
-
-                th.save(dynamics.state_dict(), dyn_path)
+                save_module_state(dynamics, dyn_path)
             step = model.num_timesteps
             if step % config.eval_freq == 0 or step == config.steps:
                 row = {

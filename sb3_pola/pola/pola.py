@@ -178,6 +178,7 @@ class POLA(OfflineAlgorithm):
     :param verbose: 0 silent, 1 info, 2 debug
     :param seed: random seed
     :param device: ``"cpu"``, ``"cuda"`` or ``"auto"``
+    :param check_finite_freq: gradient steps between two NaN/inf checks of losses and parameters (``1``: every step)
     :param _init_setup_model: build the networks at construction
     """
 
@@ -221,6 +222,7 @@ class POLA(OfflineAlgorithm):
         verbose: int = 0,
         seed: int | None = None,
         device: str = "auto",
+        check_finite_freq: int = 100,
         _init_setup_model: bool = True,
     ) -> None:
         super().__init__(
@@ -237,6 +239,7 @@ class POLA(OfflineAlgorithm):
             verbose=verbose,
             seed=seed,
             device=device,
+            check_finite_freq=check_finite_freq,
         )
         if not 1 <= top_k <= n_critics:
             raise ValueError(f"top_k must be in [1, n_critics={n_critics}], got {top_k}")

@@ -1,4 +1,4 @@
-"""Fault injection: kills during training and checkpoint writes, corrupt and foreign files, NaN/inf, bad observations."""
+"""Checkpoints: determinism, exact resume after a crash or a SIGKILL (also mid-write), atomic writes, the divergence guard."""
 
 from __future__ import annotations
 
@@ -15,20 +15,21 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from soak import compare_checkpoints, make_light_model, worker_command
 from stable_baselines3.common.callbacks import ConvertCallback
 
-from sb3_pola.benchmarks.soak import compare_checkpoints, make_light_model, worker_command
 from sb3_pola.common import checkpoint
 from sb3_pola.common.checkpoint import (
     CheckpointCallback,
-    DivergenceError,
-    ModelFileError,
     learn_with_checkpoints,
     load_checkpoint,
+    load_module_state,
+    load_or_make,
     save_checkpoint,
-    validate_model_file,
+    save_module_state,
 )
 from sb3_pola.common.datasets import OfflineDataset
+from sb3_pola.common.errors import DivergenceError, ModelFileError, validate_model_file
 from sb3_pola.pola.pola import POLA
 
 make_model = make_light_model  # POLA, light config, CPU, decaying learning rate: what the soak workers train
@@ -90,12 +91,17 @@ def test_crash_then_resume_is_exact(tiny_dataset: str, tmp_path: pathlib.Path) -
         return True
 
     with pytest.raises(Crash):
-        learn_with_checkpoints(lambda: make_model(tiny_dataset), total, tmp_path, save_freq=10, callback=crash)
+        learn_with_checkpoints(POLA, lambda: make_model(tiny_dataset), total, tmp_path, save_freq=10, callback=crash)
     latest = tmp_path / "pola_latest.zip"
     assert validate_model_file(latest)["num_timesteps"] == 30
     th.manual_seed(12345)  # whatever ran in between, the checkpoint's RNG state is restored
     resumed = learn_with_checkpoints(
-        lambda: make_model(tiny_dataset), total, tmp_path, save_freq=10, load_kwargs=dict(dataset=tiny_dataset, device="cpu")
+        POLA,
+        lambda: make_model(tiny_dataset),
+        total,
+        tmp_path,
+        save_freq=10,
+        load_kwargs=dict(dataset=tiny_dataset, device="cpu"),
     )
     assert resumed._total_timesteps == total  # same learning-rate schedule
     assert_same_training_state(reference, resumed)
@@ -123,7 +129,7 @@ def test_sigkill_during_training_and_during_checkpoint_write(tiny_dataset: str, 
     try:
         reference = tmp_path / "reference.zip"
         uninterrupted = learn_with_checkpoints(
-            lambda: make_model(tiny_dataset), total, tmp_path / "ref_run", save_freq, log_interval=0
+            POLA, lambda: make_model(tiny_dataset), total, tmp_path / "ref_run", save_freq, log_interval=0
         )
         save_checkpoint(uninterrupted, reference)
     finally:
@@ -174,15 +180,20 @@ def test_failed_write_keeps_previous_checkpoint(tiny_dataset: str, tmp_path: pat
     path = save_checkpoint(model, tmp_path / "ckpt.zip")
     before = path.read_bytes()
     model.learn(5, reset_num_timesteps=False)
+    renames = []
 
-    def fail(tmp: pathlib.Path) -> None:
+    def fail(tmp: str | os.PathLike, destination: str | os.PathLike) -> None:
+        tmp = pathlib.Path(tmp)
+        renames.append(destination)
         assert tmp.parent == path.parent and zipfile.is_zipfile(tmp)
+        assert validate_model_file(tmp)["num_timesteps"] == 10  # the temp file is the complete new checkpoint
         assert path.read_bytes() == before  # while the new file is written, the old one is untouched
         raise OSError("disk full")
 
-    monkeypatch.setattr(checkpoint, "before_replace_hook", fail)
+    monkeypatch.setattr(checkpoint.os, "replace", fail)
     with pytest.raises(OSError, match="disk full"):
         save_checkpoint(model, path)
+    assert renames == [path]  # the write failed at the rename over the checkpoint
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ckpt.zip"]  # no temp file left
 
@@ -210,8 +221,7 @@ def test_nan_parameter_stops_training_and_keeps_good_checkpoint(tiny_dataset: st
                 model.critic.q_net[0].weight[0, 0, 0] = float("nan")
         return True
 
-    model = make_model(tiny_dataset)
-    model.check_finite_freq = 1
+    model = make_model(tiny_dataset, check_finite_freq=1)
     callback = CheckpointCallback(save_freq=10, save_path=tmp_path)
     with pytest.raises(
         DivergenceError,
@@ -235,91 +245,54 @@ def test_nan_parameter_stops_training_and_keeps_good_checkpoint(tiny_dataset: st
 def test_nan_loss_is_named(tmp_path: pathlib.Path) -> None:
     rewards = np.zeros(64)
     rewards[3] = np.inf  # one bad reward poisons the critic's TD target
-    model = make_model(in_memory_dataset(rewards=rewards), rollout_length=0)
-    model.check_finite_freq = 1  # every step: the error names the exact step
+    # a check every step: the error names the exact step
+    model = make_model(in_memory_dataset(rewards=rewards), rollout_length=0, check_finite_freq=1)
     with pytest.raises(DivergenceError) as info:
         model.learn(100, callback=CheckpointCallback(save_freq=1000, save_path=tmp_path))
     message = str(info.value)
     match = re.search(r"NaN or inf in losses [a-z_0-9, ]*critic_loss.* at gradient step (\d+) ", message)
     assert match, message
     assert f"(first non-finite after step {int(match.group(1)) - 1}," in message
-    assert not (tmp_path / "pola_latest.zip").exists() or validate_model_file(tmp_path / "pola_latest.zip")
+    latest = tmp_path / "pola_latest.zip"
+    if latest.exists():  # a checkpoint written before the divergence was found holds finite weights only
+        assert validate_model_file(latest)["num_timesteps"] < int(match.group(1))
+        loaded = POLA.load(latest, device="cpu")
+        assert all(th.isfinite(v).all() for v in loaded.policy.state_dict().values() if v.is_floating_point())
 
 
-# --------------------------------------------------------------------------- load and predict validation
+# --------------------------------------------------------------------------- loading or making, shared parts
 
 
-@pytest.fixture
-def saved_model(tiny_dataset: str, tmp_path: pathlib.Path) -> tuple[POLA, pathlib.Path]:
-    model = make_model(tiny_dataset).learn(3)
-    path = tmp_path / "model.zip"
-    model.save(path)
-    return model, path
+def test_load_or_make(tiny_dataset: str, tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "ckpt.zip"
+    stale = tmp_path / ".ckpt.zip.abc.tmp.zip"
+    stale.write_bytes(b"killed mid-write")
+    fresh = load_or_make(POLA, path, lambda: make_model(tiny_dataset))
+    assert fresh.num_timesteps == 0 and not stale.exists()
+    save_checkpoint(fresh.learn(4), path)
+    resumed = load_or_make(POLA, path, lambda: pytest.fail("a checkpoint exists"), dataset=tiny_dataset, device="cpu")
+    assert resumed.num_timesteps == 4
+    assert_same_training_state(fresh, resumed)
 
 
-def test_load_missing_file(tmp_path: pathlib.Path) -> None:
-    with pytest.raises(FileNotFoundError, match=r"No model file at .*nothing"):
-        POLA.load(tmp_path / "nothing")
+def test_module_state_round_trip_and_atomic(tiny_dataset: str, tmp_path: pathlib.Path, monkeypatch) -> None:
+    model = make_model(tiny_dataset).learn(2)  # fits the dynamics model
+    dynamics = model.policy.dynamics
+    assert dynamics is not None
+    path = save_module_state(dynamics, tmp_path / "dynamics.pt")
+    other = make_model(tiny_dataset, seed=3).policy.dynamics
+    assert other is not None
+    assert not all(th.equal(a, b) for a, b in zip(dynamics.state_dict().values(), other.state_dict().values(), strict=True))
+    load_module_state(other, path)
+    state, loaded = dynamics.state_dict(), other.state_dict()
+    assert state.keys() == loaded.keys() and all(th.equal(state[k], loaded[k]) for k in state)
+    before = path.read_bytes()
 
+    def fail(tmp: str | os.PathLike, destination: str | os.PathLike) -> None:
+        raise OSError("disk full")
 
-@pytest.mark.parametrize("keep", [0.0, 0.5, 0.99])
-def test_load_truncated_file(saved_model, keep: float) -> None:
-    _, path = saved_model
-    data = path.read_bytes()
-    path.write_bytes(data[: int(len(data) * keep)])
-    with pytest.raises(ModelFileError, match="truncated or corrupt zip"):
-        POLA.load(path)
-
-
-def test_load_corrupt_member(saved_model) -> None:
-    _, path = saved_model
-    with zipfile.ZipFile(path) as archive:
-        info = archive.getinfo("policy.pth")
-    data = bytearray(path.read_bytes())
-    offset = info.header_offset + 30 + len(info.filename) + len(info.extra) + info.compress_size // 2
-    data[offset] ^= 0xFF
-    path.write_bytes(bytes(data))
-    with pytest.raises(ModelFileError, match=r"corrupt|not a valid"):
-        POLA.load(path)
-
-
-def test_load_foreign_zip(tmp_path: pathlib.Path) -> None:
-    path = tmp_path / "foreign.zip"
-    with zipfile.ZipFile(path, "w") as archive:
-        archive.writestr("hello.txt", "not a model")
-    with pytest.raises(ModelFileError, match=r"not a saved POLA model file: it has no data, policy\.pth"):
-        POLA.load(path)
-
-
-def test_load_other_algorithm(tmp_path: pathlib.Path) -> None:
-    from stable_baselines3 import TD3
-
-    path = tmp_path / "td3.zip"
-    TD3("MlpPolicy", "Pendulum-v1", policy_kwargs=dict(net_arch=[8]), device="cpu").save(path)
-    with pytest.raises(ModelFileError, match="policy TD3Policy, not a POLA model"):
-        POLA.load(path)
-
-
-def test_load_onto_env_with_other_spaces(saved_model) -> None:
-    _, path = saved_model
-    env = gym.make("Pendulum-v1")
-    with pytest.raises(
-        ValueError, match=r"model has observation space Box.*\(3,\).*the env has observation space Box.*\(3,\)"
-    ):
-        POLA.load(path, env=env)
-
-
-def test_predict_rejects_bad_observations(saved_model) -> None:
-    model, _ = saved_model
-    assert model.predict(np.zeros(3, dtype=np.float32))[0].shape == (2,)
-    assert model.predict(np.zeros((5, 3), dtype=np.float32))[0].shape == (5, 2)
-    with pytest.raises(ValueError, match=r"shape \(4,\); this model expects \(3,\)"):
-        model.predict(np.zeros(4, dtype=np.float32))
-    with pytest.raises(ValueError, match=r"shape \(2, 2, 3\)"):
-        model.predict(np.zeros((2, 2, 3), dtype=np.float32))
-    bad = np.zeros((2, 3), dtype=np.float32)
-    bad[1, 2] = np.nan
-    with pytest.raises(ValueError, match=r"NaN or inf \(1 values, e.g. at index \(1, 2\): nan\)"):
-        model.predict(bad)
-    with pytest.raises(ValueError, match="NaN or inf"):
-        model.predict(np.array([0.0, np.inf, 0.0]))
+    monkeypatch.setattr(checkpoint.os, "replace", fail)
+    with pytest.raises(OSError, match="disk full"):
+        save_module_state(other, path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dynamics.pt"]  # no temp file left

@@ -1,20 +1,25 @@
 """Reliability harness: a resumable training worker, a kill-and-resume soak loop, and a peak-memory probe.
 
-Not run in CI (``tests/test_reliability.py`` runs short versions). Commands::
+A test tool, not part of the package: ``tests/test_checkpoint.py`` runs short versions; the long runs are
+not run in CI. Commands, from the repository's root::
 
     # hours of training with periodic checkpoints, SIGKILLed at random moments (some mid-write) and
     # resumed, each finished run compared bit for bit with one uninterrupted run:
-    python -m sb3_pola.benchmarks.soak soak --minutes 120 --total 20000 --save-freq 500 --out soak_report.json
+    python tests/soak.py soak --minutes 120 --total 20000 --save-freq 500 --out soak_report.json
 
     # peak resident memory when training on a 2M-transition (HalfCheetah medium-expert sized) dataset:
-    python -m sb3_pola.benchmarks.soak memory --n 2000000 --obs-dim 17 --act-dim 6 --steps 200
+    python tests/soak.py memory --n 2000000 --obs-dim 17 --act-dim 6 --steps 200
 
     # one training process (what the soak loop starts and kills):
-    python -m sb3_pola.benchmarks.soak worker --dataset ID --dir runs/x --total 5000 --save-freq 100
+    python tests/soak.py worker --dataset ID --dir runs/x --total 5000 --save-freq 100
 
 Without ``--dataset`` the soak loop writes a small synthetic Minari dataset in a temp folder. Workers import
-the package afresh: run the soak from a checkout nobody edits (a changed source is detected, such runs are
-reported as inconclusive and the reference is recomputed).
+the package of this checkout afresh: run the soak from a checkout nobody edits (a changed source is detected,
+such runs are reported as inconclusive and the reference is recomputed).
+
+A worker is made to stop inside a checkpoint write (``--write-delay``) by patching, in its own process,
+``os.replace`` (the temp file is complete, the rename has not happened) or ``torch.save`` (SB3 is writing the
+zip): the library has no hook for it.
 """
 
 from __future__ import annotations
@@ -30,7 +35,11 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from typing import Any
+
+# the checkout this file belongs to: its workers import that package (as ``python -m`` from the root would)
+REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 # A configuration that trains fast on a CPU and still uses every part of POLA (dynamics model, look-ahead, EMA).
 LIGHT_CONFIG: dict[str, Any] = dict(
@@ -60,6 +69,43 @@ def make_light_model(dataset: Any, seed: int = 0, **overrides: Any) -> Any:
     )
 
 
+def slow_down_checkpoint_writes(stage: str, delay: float, marker: pathlib.Path) -> Callable[[], None]:
+    """Make every checkpoint write of this process write ``marker`` and sleep ``delay`` seconds at ``stage``.
+
+    :param stage: ``"before_replace"``: the temp file is complete, the rename has not happened (``os.replace``
+        patched); ``"mid_zip"``: inside SB3's zip writing, the temp file is a truncated zip (``torch.save`` patched)
+    :param delay: seconds to sleep there (the parent kills the process meanwhile)
+    :param marker: file written when a write reaches ``stage``
+    :return: undoes the patch
+    """
+    import torch as th
+
+    def pause(where: str) -> None:
+        marker.write_text(where)  # the parent kills us now
+        time.sleep(delay)
+
+    real_replace, real_save = os.replace, th.save
+
+    def slow_replace(src: Any, dst: Any, *replace_args: Any, **replace_kwargs: Any) -> None:
+        if str(src).endswith(".tmp.zip"):
+            pause(str(src))
+        real_replace(src, dst, *replace_args, **replace_kwargs)
+
+    def slow_save(*save_args: Any, **save_kwargs: Any) -> None:
+        pause("mid_zip")
+        real_save(*save_args, **save_kwargs)
+
+    if stage == "before_replace":
+        os.replace = slow_replace
+    else:
+        th.save = slow_save
+
+    def undo() -> None:
+        os.replace, th.save = real_replace, real_save
+
+    return undo
+
+
 def run_worker(args: argparse.Namespace) -> int:
     """Train to ``--total`` steps, resuming from ``--dir`` if a checkpoint is there; save ``--final`` at the end."""
     import torch as th
@@ -68,33 +114,20 @@ def run_worker(args: argparse.Namespace) -> int:
     from sb3_pola.pola.pola import POLA
 
     th.set_num_threads(1)
+    undo: Callable[[], None] | None = None
     if args.write_delay > 0:
-        marker = pathlib.Path(args.write_marker)
-
-        def pause(where: str) -> None:
-            marker.write_text(where)  # the parent kills us now
-            time.sleep(args.write_delay)
-
-        if args.write_stage == "before_replace":  # the temp file is complete, the rename has not happened
-            checkpoint.before_replace_hook = lambda tmp: pause(str(tmp))
-        else:  # "mid_zip": inside SB3's zip writing, the temp file is a truncated zip (torch.save of this process only)
-            real_save = th.save
-
-            def slow_save(*save_args: Any, **save_kwargs: Any) -> None:
-                pause("mid_zip")
-                real_save(*save_args, **save_kwargs)
-
-            th.save = slow_save
+        undo = slow_down_checkpoint_writes(args.write_stage, args.write_delay, pathlib.Path(args.write_marker))
     model = checkpoint.learn_with_checkpoints(
+        POLA,
         lambda: make_light_model(args.dataset, args.seed),
         total_timesteps=args.total,
         save_path=args.dir,
         save_freq=args.save_freq,
-        algorithm_class=POLA,
         load_kwargs=dict(dataset=args.dataset, device="cpu"),
         log_interval=0,
     )
-    checkpoint.before_replace_hook = None
+    if undo is not None:
+        undo()
     if args.final:
         checkpoint.save_checkpoint(model, args.final)
     return 0
@@ -109,7 +142,7 @@ def worker_command(
     final: str | os.PathLike | None = None,
 ) -> list[str]:
     """The command line of one worker process."""
-    command = [sys.executable, "-m", "sb3_pola.benchmarks.soak", "worker", "--dataset", dataset, "--dir", str(directory)]
+    command = [sys.executable, str(pathlib.Path(__file__).resolve()), "worker", "--dataset", dataset, "--dir", str(directory)]
     command += ["--total", str(total), "--save-freq", str(save_freq), "--seed", str(seed)]
     if final is not None:
         command += ["--final", str(final)]
@@ -157,7 +190,7 @@ def source_fingerprint() -> str:
     """SHA-256 of the package's Python sources: workers import them afresh, so an edit mid-soak changes the numbers."""
     import hashlib
 
-    package = pathlib.Path(__file__).resolve().parents[1]
+    package = REPO_ROOT / "sb3_pola"
     digest = hashlib.sha256()
     for source in sorted(package.rglob("*.py")):
         digest.update(str(source.relative_to(package)).encode() + b"\0" + source.read_bytes())
@@ -166,7 +199,7 @@ def source_fingerprint() -> str:
 
 def checkpoint_step(path: pathlib.Path) -> int | None:
     """The step of a valid checkpoint, ``None`` if there is none; raises if the file is broken."""
-    from sb3_pola.common.checkpoint import validate_model_file
+    from sb3_pola.common.errors import validate_model_file
 
     if not path.is_file():
         return None
@@ -212,6 +245,31 @@ def make_synthetic_minari(root: pathlib.Path, dataset_id: str = "soak/synthetic-
             data_format="hdf5",
         )
     return dataset_id
+
+
+def _check_after_kill(report: dict[str, Any], mid_write: bool, run_dir: pathlib.Path, last_step: int) -> int:
+    """Count a kill in ``report`` and check the run's latest checkpoint: intact, and not older than before.
+
+    :param report: the soak's counters, updated
+    :param mid_write: the kill landed inside a checkpoint write
+    :param run_dir: the run's checkpoint folder
+    :param last_step: the latest checkpoint's step before the kill
+    :return: the latest checkpoint's step now
+    """
+    latest = run_dir / "pola_latest.zip"
+    report["kills"] += 1
+    report["kills_during_checkpoint_write"] += int(mid_write)
+    report["stale_temp_files_left_by_kills"] += len(list(run_dir.glob(".*.tmp.zip")))
+    try:
+        step = checkpoint_step(latest) or 0
+    except Exception as error:  # a broken latest file is exactly what must never happen
+        report["broken_latest_files"] += 1
+        print(f"BROKEN latest checkpoint after a kill: {error}", flush=True)
+        latest.unlink()
+        step = 0
+    if step < last_step:
+        report["checkpoint_step_regressions"] += 1
+    return max(last_step, step)
 
 
 def run_soak(args: argparse.Namespace) -> int:
@@ -288,19 +346,7 @@ def run_soak(args: argparse.Namespace) -> int:
             if process.poll() is None:
                 process.send_signal(signal.SIGKILL)
                 process.wait()
-                report["kills"] += 1
-                report["kills_during_checkpoint_write"] += int(during_write and marker.exists())
-                report["stale_temp_files_left_by_kills"] += len(list(run_dir.glob(".*.tmp.zip")))
-                try:
-                    step = checkpoint_step(latest) or 0
-                except Exception as error:  # a broken latest file is exactly what must never happen
-                    report["broken_latest_files"] += 1
-                    print(f"BROKEN latest checkpoint after a kill: {error}", flush=True)
-                    latest.unlink()
-                    step = 0
-                if step < last_step:
-                    report["checkpoint_step_regressions"] += 1
-                last_step = max(last_step, step)
+                last_step = _check_after_kill(report, during_write and marker.exists(), run_dir, last_step)
                 continue
             stderr = log.read_text(errors="replace")
             if process.returncode != 0:
@@ -419,7 +465,7 @@ def run_memory(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m sb3_pola.benchmarks.soak", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python tests/soak.py", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     worker = sub.add_parser("worker", help="train to --total steps, resuming from --dir")
     worker.add_argument("--dataset", required=True)
@@ -454,4 +500,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    sys.path.insert(0, str(REPO_ROOT))
     sys.exit(main())

@@ -1,0 +1,68 @@
+"""The D4RL normalised score, ``100 (R - ref_min) / (ref_max - ref_min)``: the one implementation.
+
+This module imports only NumPy and the standard library: the d3rlpy baselines' worker
+(:mod:`sb3_pola.experiments.peers_worker`) runs in a virtual environment without ``sb3_pola`` and
+loads this file by its path.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+
+_warned_no_ref: set[str] = set()
+
+
+def has_reference_scores(ref_min: float | None, ref_max: float | None) -> bool:
+    """Whether the reference returns define a score: both known and different.
+
+    :param ref_min: return of a random policy
+    :param ref_max: return of an expert policy
+    """
+    return ref_min is not None and ref_max is not None and ref_max != ref_min
+
+
+def normalized_scores(
+    returns: float | Sequence[float] | np.ndarray, ref_min: float | None, ref_max: float | None
+) -> np.ndarray:
+    """The D4RL score of each return, float64 of the shape of ``returns`` (NaN without usable reference scores).
+
+    :param returns: one return or several
+    :param ref_min: return of a random policy
+    :param ref_max: return of an expert policy
+    :return: ``100 (R - ref_min) / (ref_max - ref_min)`` per return
+    """
+    values = np.asarray(returns, dtype=np.float64)
+    if not has_reference_scores(ref_min, ref_max):
+        return np.full(values.shape, np.nan)
+    assert ref_min is not None and ref_max is not None
+    return 100.0 * (values - ref_min) / (ref_max - ref_min)
+
+
+def normalized_score(
+    returns: float | Sequence[float] | np.ndarray, ref_min: float | None, ref_max: float | None, source: str = ""
+) -> float | None:
+    """The D4RL score of the mean return (equal to the mean of the scores: the score is affine in the return).
+
+    :param returns: one return or several (their mean is scored)
+    :param ref_min: return of a random policy
+    :param ref_max: return of an expert policy
+    :param source: whose reference scores these are, for the warning (e.g. ``"Dataset 'hopper/medium-v0'"``)
+    :return: the score, or ``None`` (with a warning, once per source and reference scores) when they are missing
+    """
+    if not has_reference_scores(ref_min, ref_max):
+        key = f"{source}|{ref_min}|{ref_max}"
+        if key not in _warned_no_ref:
+            _warned_no_ref.add(key)
+            warnings.warn(
+                f"{source or 'Scoring'}: no reference scores to normalise with (ref_min_score={ref_min}, "
+                f"ref_max_score={ref_max}): the normalised score is None"
+            )
+        return None
+    mean_return = float(np.mean(np.asarray(returns, dtype=np.float64)))
+    return float(normalized_scores(mean_return, ref_min, ref_max))
+
+
+__all__ = ["has_reference_scores", "normalized_score", "normalized_scores"]

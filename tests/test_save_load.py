@@ -1,0 +1,85 @@
+"""Saving and loading: clear errors for missing, truncated, corrupt and foreign files and for an env of other spaces."""
+
+from __future__ import annotations
+
+import pathlib
+import zipfile
+
+import gymnasium as gym
+import pytest
+from soak import make_light_model
+
+from sb3_pola.common.errors import ModelFileError
+from sb3_pola.pola.pola import POLA
+
+make_model = make_light_model
+
+
+@pytest.fixture
+def saved_model(tiny_dataset: str, tmp_path: pathlib.Path) -> tuple[POLA, pathlib.Path]:
+    model = make_model(tiny_dataset).learn(3)
+    path = tmp_path / "model.zip"
+    model.save(path)
+    return model, path
+
+
+def test_load_missing_file(tmp_path: pathlib.Path) -> None:
+    with pytest.raises(FileNotFoundError, match=r"No model file at .*nothing"):
+        POLA.load(tmp_path / "nothing")
+
+
+@pytest.mark.parametrize("keep", [0.0, 0.5, 0.99])
+def test_load_truncated_file(saved_model, keep: float) -> None:
+    _, path = saved_model
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * keep)])
+    with pytest.raises(ModelFileError, match="truncated or corrupt zip"):
+        POLA.load(path)
+
+
+def test_load_corrupt_member(saved_model) -> None:
+    _, path = saved_model
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo("policy.pth")
+    data = bytearray(path.read_bytes())
+    offset = info.header_offset + 30 + len(info.filename) + len(info.extra) + info.compress_size // 2
+    data[offset] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(ModelFileError, match=r"corrupt|not a valid"):
+        POLA.load(path)
+
+
+def test_load_foreign_zip(tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "foreign.zip"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("hello.txt", "not a model")
+    with pytest.raises(ModelFileError, match=r"not a saved POLA model file: it has no data, policy\.pth"):
+        POLA.load(path)
+
+
+def test_load_other_algorithm(tmp_path: pathlib.Path) -> None:
+    from stable_baselines3 import TD3
+
+    path = tmp_path / "td3.zip"
+    TD3("MlpPolicy", "Pendulum-v1", policy_kwargs=dict(net_arch=[8]), device="cpu").save(path)
+    with pytest.raises(ModelFileError, match="policy TD3Policy, not a POLA model"):
+        POLA.load(path)
+
+
+def test_load_onto_env_with_other_spaces(saved_model) -> None:
+    _, path = saved_model
+    env = gym.make("Pendulum-v1")
+    with pytest.raises(
+        ValueError, match=r"model has observation space Box.*\(3,\).*the env has observation space Box.*\(3,\)"
+    ):
+        POLA.load(path, env=env)
+
+
+def test_check_finite_freq_is_a_saved_hyperparameter(tiny_dataset: str, tmp_path: pathlib.Path) -> None:
+    assert make_model(tiny_dataset).check_finite_freq == 100  # the default
+    model = make_model(tiny_dataset, check_finite_freq=7)
+    assert model.check_finite_freq == 7
+    model.save(tmp_path / "model.zip")
+    assert POLA.load(tmp_path / "model.zip", device="cpu").check_finite_freq == 7
+    with pytest.raises(ValueError, match="check_finite_freq"):
+        make_model(tiny_dataset, check_finite_freq=-1)
