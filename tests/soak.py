@@ -434,7 +434,7 @@ def run_memory(args: argparse.Namespace) -> int:
     data = synthetic(n)
     phases = {"dataset": _peak_bytes()}
     model = POLA("MlpPolicy", dataset=data, seed=0, device="cpu", **config)
-    phases["model"] = _peak_bytes()
+    phases["model"] = _peak_bytes()  # with its replay buffer (tensors sharing the dataset's arrays on CPU)
     model._setup_learn(args.steps)
     phases["replay_buffer"] = _peak_bytes()
     model._before_training()

@@ -8,6 +8,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.buffers import BaseBuffer
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
+from stable_baselines3.common.vec_env import VecNormalize
 
 from sb3_pola.common.datasets import OfflineDataset
 
@@ -73,7 +74,7 @@ class OfflineReplayBuffer(BaseBuffer):
     def extend(self, *args: Any, **kwargs: Any) -> None:
         raise TypeError("OfflineReplayBuffer is read-only: an offline dataset cannot be extended")
 
-    def sample(self, batch_size: int, env: Any = None) -> ReplayBufferSamples:
+    def sample(self, batch_size: int, env: VecNormalize | None = None) -> ReplayBufferSamples:
         """Uniformly sample transitions (with replacement).
 
         :param batch_size: number of transitions
@@ -84,7 +85,9 @@ class OfflineReplayBuffer(BaseBuffer):
         indices = th.randint(0, self.buffer_size, (batch_size,), device=self.device)
         return self._get_samples(indices)
 
-    def _get_samples(self, batch_inds: Any, env: Any = None) -> ReplayBufferSamples:  # type: ignore[override]
+    def _get_samples(  # type: ignore[override]
+        self, batch_inds: np.ndarray | th.Tensor, env: VecNormalize | None = None
+    ) -> ReplayBufferSamples:
         indices = th.as_tensor(batch_inds, device=self.device, dtype=th.long)
         return ReplayBufferSamples(
             observations=self.observations[indices],

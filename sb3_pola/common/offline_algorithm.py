@@ -9,6 +9,7 @@ import sys
 import time
 import warnings
 from collections import deque
+from collections.abc import Iterable
 from typing import Any, TypeVar
 
 import gymnasium as gym
@@ -339,8 +340,8 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
     def save(
         self,
         path: str | pathlib.Path | io.BufferedIOBase,
-        exclude: Any = None,
-        include: Any = None,
+        exclude: Iterable[str] | None = None,
+        include: Iterable[str] | None = None,
         check_finite: bool = True,
     ) -> None:
         """Save the model (SB3 zip); refuses NaN/inf weights so a diverged model never replaces a good one.
@@ -438,7 +439,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         self._check_observation(observation)
         return super().predict(observation, state, episode_start, deterministic)
 
-    def _check_observation(self, observation: Any) -> None:
+    def _check_observation(self, observation: np.ndarray) -> None:
         space = self.observation_space
         if isinstance(observation, dict) or not isinstance(space, spaces.Box):
             return

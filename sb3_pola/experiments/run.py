@@ -51,10 +51,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--compile",
         action="store_true",
-        help="compile_update=True: the update through torch.compile (CUDA graphs on a GPU); compiles for 1-3 minutes first",
+        help="compile_update=True: torch.compile of the update (CUDA graphs on a GPU); the first step compiles for minutes",
     )
     # One thread by default: the light configuration's small matmuls gain little from more, and on a
-    # machine whose cores are busy OpenMP's waiting made a 2-thread run 3.5x slower (6.8 vs 24 steps/s).
+    # machine whose cores are busy OpenMP's spin-waiting makes a multi-thread run much slower.
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: torch's default)")
     parser.add_argument("--extra", help="JSON of further POLA arguments, e.g. '{\"backprop_through_model\": false}'")
     return parser.parse_args(argv)
