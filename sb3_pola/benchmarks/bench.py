@@ -24,6 +24,8 @@ from typing import Any
 
 import torch as th
 
+from sb3_pola.cli import missing_extra, missing_extra_message
+
 SECTIONS = ("train", "predict", "export", "data", "dynamics")
 
 
@@ -263,8 +265,14 @@ def run_section(name: str, quick: bool, device: str, policy_kwargs: dict[str, An
             module = importlib.import_module(f"sb3_pola.benchmarks.{name}_bench")
             result = module.run(quick)
     except Exception as error:  # one broken section must not lose the others
-        traceback.print_exc()
-        result = {"error": f"{type(error).__name__}: {error}"}
+        extra = missing_extra("bench", error)
+        if extra is None:
+            traceback.print_exc()
+            result = {"error": f"{type(error).__name__}: {error}"}
+        else:  # e.g. the export section without onnxruntime: say which extra, no traceback
+            message = missing_extra_message("bench", extra, error)
+            print(message, file=sys.stderr)
+            result = {"skipped": message}
     print(f"[bench] {name}: {time.perf_counter() - start:.1f} s", flush=True)
     return result
 
