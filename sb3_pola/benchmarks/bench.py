@@ -5,7 +5,7 @@ Sections: gradient steps per second over configurations with FLOPs and roofline 
 the exported policy's latency under ONNX Runtime and TorchScript (:mod:`~sb3_pola.benchmarks.export_bench`, CPU),
 dataset load time and memory (:mod:`~sb3_pola.benchmarks.data_bench`) and the dynamics model's fit time
 (:mod:`~sb3_pola.benchmarks.dynamics_bench`). Timings are medians after warm-up. ``--quick`` runs a
-reduced set in under 2 minutes on 2 CPU cores. Runs unchanged on CUDA (``--device cuda``).
+reduced set (fewer configurations, sizes and repetitions) as a smoke check. Runs unchanged on CUDA (``--device cuda``).
 """
 
 from __future__ import annotations
@@ -279,7 +279,7 @@ def run_section(name: str, quick: bool, device: str, policy_kwargs: dict[str, An
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sb3-pola bench", description=__doc__)
-    parser.add_argument("--quick", action="store_true", help="reduced set, under 2 minutes on 2 CPU cores")
+    parser.add_argument("--quick", action="store_true", help="reduced set (fewer configurations, sizes and repetitions): a smoke check")
     parser.add_argument("--out", default="benchmarks/results", help="folder of the JSON and the README table")
     parser.add_argument("--device", default="auto", help="cpu, cuda or auto (cuda when available)")
     parser.add_argument("--threads", type=int, default=None, help="torch intra-op threads (default: all cores)")
