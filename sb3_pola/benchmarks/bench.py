@@ -279,7 +279,9 @@ def run_section(name: str, quick: bool, device: str, policy_kwargs: dict[str, An
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sb3-pola bench", description=__doc__)
-    parser.add_argument("--quick", action="store_true", help="reduced set (fewer configurations, sizes and repetitions): a smoke check")
+    parser.add_argument(
+        "--quick", action="store_true", help="reduced set (fewer configurations, sizes and repetitions): a smoke check"
+    )
     parser.add_argument("--out", default="benchmarks/results", help="folder of the JSON and the README table")
     parser.add_argument("--device", default="auto", help="cpu, cuda or auto (cuda when available)")
     parser.add_argument("--threads", type=int, default=None, help="torch intra-op threads (default: all cores)")
