@@ -14,7 +14,7 @@ STEPS ?= 6000
 SEED ?= 0
 OUT ?= outputs/main
 PYTEST_ARGS ?=
-# one torch thread by default (the README's figures); e.g. BENCH_ARGS="--device cuda" on a GPU
+# one torch thread by default (as docs/benchmarks.md's figures); e.g. BENCH_ARGS="--device cuda" on a GPU
 BENCH_ARGS ?= --threads 1
 
 .PHONY: install train test test-all lint format type bench bench-quick score peers clean

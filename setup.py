@@ -19,7 +19,8 @@ setup(
     long_description=long_description,
     long_description_content_type="text/markdown",
     packages=[package for package in find_packages() if package.startswith("sb3_pola")],
-    package_data={"sb3_pola": ["py.typed", "version.txt", "data/**/*"]},
+    # hyperparams/pola.yml: the rl-zoo3 default config of `sb3-pola train|optimize`, found through importlib.resources
+    package_data={"sb3_pola": ["py.typed", "version.txt", "hyperparams/*.yml", "data/**/*"]},
     include_package_data=True,
     python_requires=">=3.10",
     install_requires=[

@@ -50,6 +50,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.envs.registration import EnvSpec
 
+from sb3_pola.cli import missing_extra_message
 from sb3_pola.collect import (
     MIN_REF_EPISODES,
     dataset_summary,
@@ -63,10 +64,6 @@ KINDS = ("planner", "random")
 MAZE_PREFIX = "PointMaze_"
 # D4RL maze2d's (and Minari's pointmaze) evaluation goal cell (row, column) of each map
 EVAL_GOAL_CELLS = {"umaze": (1, 1), "medium": (6, 6), "large": (7, 9)}
-MISSING_EXTRA = (
-    "The point mazes need Gymnasium-Robotics, the 'maze' extra of sb3_pola: "
-    'pip install "sb3_pola[maze]" (or pip install gymnasium-robotics)'
-)
 # row, column steps to the four neighbouring cells
 _MOVES = ((-1, 0), (1, 0), (0, -1), (0, 1))
 
@@ -74,7 +71,7 @@ Cell = tuple[int, int]
 
 
 class MissingExtraError(ImportError):
-    """An optional dependency of sb3_pola is not installed."""
+    """Gymnasium-Robotics (the ``maze`` extra) is not installed; ``sb3-pola`` turns it into its extra message."""
 
 
 def is_maze_env(env_id: str | None) -> bool:
@@ -88,7 +85,9 @@ def require_robotics() -> None:
         with contextlib.redirect_stderr(io.StringIO()):  # its import prints a notice about unrelated (Adroit) envs
             import gymnasium_robotics
     except ImportError as error:
-        raise MissingExtraError(MISSING_EXTRA) from error
+        raise MissingExtraError(
+            f"{missing_extra_message('collect', 'maze', error)} (or pip install gymnasium-robotics)"
+        ) from error
     gym.register_envs(gymnasium_robotics)
 
 
@@ -252,11 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     if not is_maze_env(args.env):
         print(f"{args.env} is not a point maze ({MAZE_PREFIX}...-v3)", file=sys.stderr)
         return 2
-    try:
-        require_robotics()
-    except MissingExtraError as error:
-        print(error, file=sys.stderr)
-        return 2
+    require_robotics()  # MissingExtraError: sb3-pola's dispatcher prints which extra to install
     try:
         data_spec, eval_spec = data_env_spec(args.env, args.episode_steps), eval_env_spec(args.env, args.eval_steps)
     except gym.error.Error as error:

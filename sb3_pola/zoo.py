@@ -7,7 +7,8 @@ launchers register POLA (``ALGOS``, the optimizer's ``HYPERPARAMS_SAMPLER`` and
 own ``train()`` / ``enjoy()`` on the remaining arguments, so every zoo flag works as usual
 (``-conf``, ``-params``, ``--eval-freq``, ``--save-freq``, ``-tb``, ``-i``, ``--seed``, ``-f``,
 ``-P``, ``--storage``, ``--study-name``...). Defaults added when absent: ``--algo pola`` and, for
-``train``/``optimize``, ``-conf hyperparams/pola.yml``; ``optimize`` adds ``-optimize``.
+``train``/``optimize``, ``-conf`` the package's ``sb3_pola/hyperparams/pola.yml`` (installed with it, see
+:func:`default_config`); ``optimize`` adds ``-optimize``. rl-zoo3, PyYAML and Optuna come with the ``zoo`` extra.
 
 Naming: ``--env <dataset>`` selects both the env and the dataset. A dataset's env id is its Minari
 id with every ``/`` but the last turned into ``-`` (Gymnasium ids allow one namespace):
@@ -29,6 +30,7 @@ model; ``--save-replay-buffer`` is ignored (the replay buffer is the dataset).
 from __future__ import annotations
 
 import contextlib
+import importlib.resources
 import os
 import pathlib
 import socket
@@ -37,7 +39,6 @@ from collections.abc import Iterable, Iterator
 from typing import Any
 
 import gymnasium as gym
-import yaml
 from gymnasium.envs.registration import parse_env_id
 
 from sb3_pola.common.callbacks import NormalizedScoreEvalCallback
@@ -47,8 +48,6 @@ from sb3_pola.pola.pola import POLA
 
 ALGO_NAME = "pola"
 COMMANDS = ("train", "enjoy", "optimize")
-# Repository copy of the zoo config (not installed with the package: pass -conf elsewhere).
-DEFAULT_CONFIG = pathlib.Path(__file__).resolve().parent.parent / "hyperparams" / f"{ALGO_NAME}.yml"
 
 # Dataset family (first part of a dataset id) -> Gymnasium env, used when the dataset is not on disk.
 FAMILY_ENVS: dict[str, str] = {
@@ -144,6 +143,8 @@ def config_datasets(config: str | os.PathLike | None) -> dict[str, str]:
     """``{env id: dataset id}`` of the YAML entries that set ``dataset:`` (the key being the env id)."""
     if config is None or not str(config).endswith((".yml", ".yaml")) or not os.path.isfile(config):
         return {}
+    import yaml
+
     with open(config) as file:
         entries = yaml.safe_load(file) or {}
     return {
@@ -168,6 +169,18 @@ def register_dataset_envs(config: str | os.PathLike | None = None, extra: Iterab
             with contextlib.suppress(gym.error.Error, ValueError):
                 register_dataset_env(dataset_id, env_id=env_id)
     return dict(DATASET_ENVS)
+
+
+# ----------------------------------------------------------------------------- config
+
+
+def default_config() -> pathlib.Path:
+    """The zoo config installed with the package (``sb3_pola/hyperparams/pola.yml``), in a clone or an install.
+
+    :return: path of the YAML file
+    """
+    resource = importlib.resources.files("sb3_pola").joinpath("hyperparams", f"{ALGO_NAME}.yml")
+    return pathlib.Path(str(resource))
 
 
 # ----------------------------------------------------------------------------- optimizer sampler
@@ -320,8 +333,8 @@ def zoo_arguments(command: str, args: list[str]) -> list[str]:
     args = list(args)
     if _option(args, "--algo") is None:
         args = ["--algo", ALGO_NAME, *args]
-    if command in ("train", "optimize") and _option(args, "-conf", "--conf-file") is None and DEFAULT_CONFIG.is_file():
-        args += ["-conf", str(DEFAULT_CONFIG)]
+    if command in ("train", "optimize") and _option(args, "-conf", "--conf-file") is None and default_config().is_file():
+        args += ["-conf", str(default_config())]
     if command == "optimize" and not {"-optimize", "--optimize-hyperparameters"} & set(args):
         args.append("-optimize")
     return args
@@ -330,7 +343,7 @@ def zoo_arguments(command: str, args: list[str]) -> list[str]:
 def usage() -> str:
     return (
         "usage: sb3-pola {train,enjoy,optimize} [rl-zoo3 arguments]\n\n"
-        "  train     rl_zoo3 train --algo pola (defaults: -conf hyperparams/pola.yml)\n"
+        f"  train     rl_zoo3 train --algo pola (defaults: -conf {default_config()})\n"
         "  enjoy     rl_zoo3 enjoy --algo pola\n"
         "  optimize  rl_zoo3 train --algo pola -optimize (add --storage/--study-name to share a study)\n\n"
         "--env is a dataset: its Minari id with all '/' but the last replaced by '-'\n"

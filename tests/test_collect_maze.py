@@ -9,7 +9,7 @@ import minari
 import numpy as np
 import pytest
 
-from sb3_pola import collect, collect_maze
+from sb3_pola import cli, collect, collect_maze
 from sb3_pola.collect import run_episodes
 from sb3_pola.collect_maze import (
     cell_distances,
@@ -141,7 +141,9 @@ def test_bad_arguments_and_missing_extra(tmp_path, monkeypatch, capsys):
         collect.main([*argv, "--kind", "medium"])  # a locomotion kind
     capsys.readouterr()
     monkeypatch.setitem(sys.modules, "gymnasium_robotics", None)  # as if not installed
-    assert collect.main(argv) == 2
+    with pytest.raises(collect_maze.MissingExtraError, match=r'pip install "sb3_pola\[maze\]"'):
+        collect.main(argv)
+    assert cli.main(["collect", *argv]) == 2  # the command line turns it into one line and status 2
     err = capsys.readouterr().err
-    assert 'pip install "sb3_pola[maze]"' in err and "Traceback" not in err
+    assert 'sb3-pola collect needs the "maze" extra: pip install "sb3_pola[maze]"' in err and "Traceback" not in err
     assert not (tmp_path / "pointmaze").exists()

@@ -193,7 +193,7 @@ def test_missing_ray_says_which_extra(
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
     assert score.main([*TINY, "--data-dir", str(data_root), "--out", str(tmp_path / "out"), "--ray"]) == 2
     err = capsys.readouterr().err
-    assert "pip install 'sb3-pola[ray]'" in err and "Traceback" not in err
+    assert 'sb3-pola score needs the "ray" extra: pip install "sb3_pola[ray]"' in err and "Traceback" not in err
     assert not (tmp_path / "out" / "scores.csv").exists()
 
 

@@ -21,7 +21,7 @@ from sb3_pola import cli, zoo
 from sb3_pola.pola.pola import POLA
 
 REPO = pathlib.Path(__file__).resolve().parent.parent
-CONFIG = REPO / "hyperparams" / "pola.yml"
+CONFIG = zoo.default_config()  # sb3_pola/hyperparams/pola.yml, installed with the package
 DATASET = "testpend/random-v0"  # env id == dataset id (one slash)
 REF_MIN, REF_MAX = 0.0, 100.0
 # keeps every run tiny: 2 critics, small nets, a 1-epoch 2-member dynamics model

@@ -5,7 +5,7 @@ Sections: gradient steps per second over configurations with FLOPs and roofline 
 the exported policy's latency under ONNX Runtime and TorchScript (:mod:`~sb3_pola.benchmarks.export_bench`, CPU),
 dataset load time and memory (:mod:`~sb3_pola.benchmarks.data_bench`) and the dynamics model's fit time
 (:mod:`~sb3_pola.benchmarks.dynamics_bench`). Timings are medians after warm-up. ``--quick`` runs a
-reduced set in under 2 minutes on 2 CPU cores. Runs unchanged on CUDA (``--device cuda``).
+reduced set (fewer configurations, sizes and repetitions) as a smoke check. Runs unchanged on CUDA (``--device cuda``).
 """
 
 from __future__ import annotations
@@ -23,6 +23,8 @@ import traceback
 from typing import Any
 
 import torch as th
+
+from sb3_pola.cli import missing_extra, missing_extra_message
 
 SECTIONS = ("train", "predict", "export", "data", "dynamics")
 
@@ -263,15 +265,23 @@ def run_section(name: str, quick: bool, device: str, policy_kwargs: dict[str, An
             module = importlib.import_module(f"sb3_pola.benchmarks.{name}_bench")
             result = module.run(quick)
     except Exception as error:  # one broken section must not lose the others
-        traceback.print_exc()
-        result = {"error": f"{type(error).__name__}: {error}"}
+        extra = missing_extra("bench", error)
+        if extra is None:
+            traceback.print_exc()
+            result = {"error": f"{type(error).__name__}: {error}"}
+        else:  # e.g. the export section without onnxruntime: say which extra, no traceback
+            message = missing_extra_message("bench", extra, error)
+            print(message, file=sys.stderr)
+            result = {"skipped": message}
     print(f"[bench] {name}: {time.perf_counter() - start:.1f} s", flush=True)
     return result
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="sb3-pola bench", description=__doc__)
-    parser.add_argument("--quick", action="store_true", help="reduced set, under 2 minutes on 2 CPU cores")
+    parser.add_argument(
+        "--quick", action="store_true", help="reduced set (fewer configurations, sizes and repetitions): a smoke check"
+    )
     parser.add_argument("--out", default="benchmarks/results", help="folder of the JSON and the README table")
     parser.add_argument("--device", default="auto", help="cpu, cuda or auto (cuda when available)")
     parser.add_argument("--threads", type=int, default=None, help="torch intra-op threads (default: all cores)")

@@ -24,10 +24,11 @@ from collections.abc import Callable
 from dataclasses import asdict
 from typing import Any
 
+from sb3_pola.cli import missing_extra_message
 from sb3_pola.experiments import score
 from sb3_pola.experiments.diagnostics import write_diagnostics
 
-MISSING_RAY = "sb3-pola score --ray needs Ray, an optional extra: pip install 'sb3-pola[ray]'"
+MISSING_RAY = missing_extra_message("score", "ray") + " (for --ray)"
 # seconds between two merges of the cells' rows into scores.csv, and between two rewrites of the reports (the
 # figures take seconds: not after every one of a large grid's cells)
 MERGE_INTERVAL = 10.0
