@@ -260,7 +260,15 @@ class EnsembleDynamics(nn.Module):
     def _loss(
         self, mean: th.Tensor, logvar: th.Tensor, logit: th.Tensor | None, y: th.Tensor, done: th.Tensor | None
     ) -> th.Tensor:
-        """Gaussian NLL (or its ``mean_loss`` form) summed over members + L2 weight decay + log-variance bounds (+ BCE)."""
+        """Gaussian NLL (or its ``mean_loss`` form) summed over members + L2 weight decay + log-variance bounds (+ BCE).
+
+        :param mean: members' means in the normalised target space ``[E, b, D]``
+        :param logvar: their bounded log-variances ``[E, b, D]``
+        :param logit: termination logits ``[E, b]`` or None
+        :param y: standardised targets ``[E, b, D]``
+        :param done: termination flags ``[E, b]`` or None
+        :return: the scalar training loss
+        """
         inv_var = th.exp(-logvar)
         sq_err = (mean - y) ** 2  # [E, b, D]
         if self.mean_loss == "nll":
