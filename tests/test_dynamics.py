@@ -182,7 +182,7 @@ def test_early_stopping_and_epoch_cap() -> None:
     data = _synthetic(1500, nonlinear=False)
     th.manual_seed(0)
     model = _small()
-    # 1200 training samples / 64 = 38 steps per pass, capped at 10 per epoch
+    # 1200 training samples / 64: 19 steps per pass, capped at 5 per epoch
     metrics = model.fit(
         data["obs"], data["act"], data["next_obs"], data["rew"], batch_size=64, max_epochs=3, max_epoch_steps=5
     )
