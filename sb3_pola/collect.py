@@ -440,6 +440,174 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@dataclass
+class PolicySources:
+    """Where the recorded actions come from: the SAC run made here (if any) and the medium / expert policies.
+
+    :param sac: the SAC model trained here, or None
+    :param medium_ckpt: its medium checkpoint
+    :param expert_ckpt: its best checkpoint
+    :param medium_model: the medium SB3 model (given zip or SAC snapshot)
+    :param expert_model: the expert SB3 model
+    :param medium: the medium policy as recorded (``--deterministic`` or not)
+    :param expert: the expert policy as recorded
+    :param expert_eval: the expert policy acting deterministically (for ``ref_max_score``)
+    """
+
+    sac: Any = None
+    medium_ckpt: Checkpoint | None = None
+    expert_ckpt: Checkpoint | None = None
+    medium_model: Any = None
+    expert_model: Any = None
+    medium: PolicyFn | None = None
+    expert: PolicyFn | None = None
+    expert_eval: PolicyFn | None = None
+
+
+def _needs(args: argparse.Namespace, kinds: list[str]) -> tuple[bool, bool, bool]:
+    """Which policies the kinds need, and whether SAC must be trained for them.
+
+    :param args: the parsed arguments
+    :param kinds: the dataset kinds to make
+    :return: ``(needs_medium, needs_expert, needs_sac)``; the expert is needed for its data or for ``ref_max_score``
+    """
+    needs_medium = any(k in ("medium", "medium-replay", "medium-expert") for k in kinds)
+    needs_expert_data = any(k in ("expert", "medium-expert") for k in kinds)
+    needs_expert = args.ref_max_score is None or needs_expert_data
+    needs_sac = (needs_medium and args.policy is None) or (needs_expert and args.expert_policy is None)
+    return needs_medium, needs_expert, needs_sac or "medium-replay" in kinds
+
+
+def _train_sac_sources(args: argparse.Namespace, progress: bool, sources: PolicySources, summary: dict[str, Any]) -> bool:
+    """Train SAC and pick its medium and expert checkpoints into ``sources`` (noted in ``summary``).
+
+    :param args: the parsed arguments
+    :param progress: show progress bars
+    :param sources: filled in place
+    :param summary: the run's summary, filled in place
+    :return: False (with a message) when the run made no checkpoint
+    """
+    sac_kwargs = {} if args.learning_starts is None else {"learning_starts": args.learning_starts}
+    model, checkpoints = train_sac(
+        args.env, args.train_steps, args.seed, args.eval_freq, args.eval_episodes, args.expert_return, progress, sac_kwargs
+    )
+    if not checkpoints:
+        print(f"no SAC checkpoint: --train-steps {args.train_steps} < --eval-freq {args.eval_freq}", file=sys.stderr)
+        return False
+    sources.sac = model
+    summary["sac_steps"] = int(model.num_timesteps)
+    summary["checkpoints"] = [(c.step, round(c.mean_return, 1)) for c in checkpoints]
+    medium_ckpt = sources.medium_ckpt = pick_medium(checkpoints, args.medium_return, args.medium_max_return)
+    expert_ckpt = sources.expert_ckpt = max(checkpoints, key=lambda c: c.mean_return)
+    summary["medium_checkpoint"] = {"step": medium_ckpt.step, "eval_return": medium_ckpt.mean_return}
+    summary["expert_checkpoint"] = {"step": expert_ckpt.step, "eval_return": expert_ckpt.mean_return}
+    return True
+
+
+def _snapshot(model: Any, checkpoint: Checkpoint | None) -> Any:
+    """A copy of the SAC model with the policy weights of ``checkpoint``.
+
+    :param model: the SAC model
+    :param checkpoint: the checkpoint
+    :return: the copy (the replay buffer is shared, not copied)
+    """
+    assert model is not None and checkpoint is not None
+    clone = copy.copy(model)
+    clone.policy = copy.deepcopy(model.policy)
+    clone.policy.load_state_dict(checkpoint.policy_state)
+    return clone
+
+
+def _load_policies(
+    args: argparse.Namespace, env: gym.Env, sources: PolicySources, needs_medium: bool, needs_expert: bool
+) -> None:
+    """The medium and expert policies: the given zips, else the SAC snapshots (into ``sources``).
+
+    :param args: the parsed arguments
+    :param env: the env (to load the zips)
+    :param sources: filled in place
+    :param needs_medium: the kinds need the medium policy
+    :param needs_expert: the kinds or the references need the expert policy
+    """
+    if needs_medium:
+        sources.medium_model = (
+            load_policy(args.policy, args.policy_algo, env) if args.policy else _snapshot(sources.sac, sources.medium_ckpt)
+        )
+        sources.medium = policy_fn(sources.medium_model, args.deterministic)
+    if needs_expert and (args.expert_policy or sources.expert_ckpt is not None):
+        sources.expert_model = (
+            load_policy(args.expert_policy, args.policy_algo, env)
+            if args.expert_policy
+            else _snapshot(sources.sac, sources.expert_ckpt)
+        )
+        sources.expert = policy_fn(sources.expert_model, args.deterministic)
+        sources.expert_eval = policy_fn(sources.expert_model, True)
+    if args.save_policies:
+        folder = pathlib.Path(args.save_policies)
+        folder.mkdir(parents=True, exist_ok=True)
+        name = args.name or default_name(args.env)
+        if needs_medium:
+            sources.medium_model.save(folder / f"{name}-medium")
+        if sources.expert is not None:
+            sources.expert_model.save(folder / f"{name}-expert")
+
+
+def _reference_scores(args: argparse.Namespace, env: gym.Env, expert_eval: PolicyFn | None) -> tuple[float, float]:
+    """``ref_min_score`` (random policy) and ``ref_max_score`` (deterministic expert), unless given.
+
+    :param args: the parsed arguments
+    :param env: the env
+    :param expert_eval: the deterministic expert policy (needed when ``--ref-max-score`` is not given)
+    :return: ``(ref_min, ref_max)``
+    """
+    ref_min = args.ref_min_score
+    if ref_min is None:
+        ref_min = float(np.mean(evaluate(env, None, args.ref_episodes, seed=args.seed + 20_000)))
+    ref_max = args.ref_max_score
+    if ref_max is None:
+        assert expert_eval is not None  # no --ref-max-score: the expert is needed, from a zip or SAC
+        ref_max = float(np.mean(evaluate(env, expert_eval, args.ref_episodes, seed=args.seed + 30_000)))
+    return ref_min, ref_max
+
+
+def _record_kind(
+    kind: str, args: argparse.Namespace, env: gym.Env, sources: PolicySources, dataset_id: str, progress: bool
+) -> tuple[list[Any], str, str]:
+    """The episodes of one dataset kind, with its ``algorithm`` and ``description`` metadata.
+
+    :param kind: one of :data:`KINDS`
+    :param args: the parsed arguments
+    :param env: the env
+    :param sources: the policies
+    :param dataset_id: the dataset id (progress bar labels)
+    :param progress: show progress bars
+    :return: ``(episodes, algorithm, description)``
+    """
+    seed = args.seed + 1 + KINDS.index(kind) * 1000
+    acting = "deterministic" if args.deterministic else "stochastic"
+    medium_ckpt, expert_ckpt = sources.medium_ckpt, sources.expert_ckpt
+    if kind == "random":
+        episodes = rollout(env, None, args.steps, seed, progress, dataset_id)
+        return episodes, "uniform random actions", "uniform random actions"
+    if kind == "medium":
+        episodes = rollout(env, sources.medium, args.steps, seed, progress, dataset_id)
+        algorithm = f"SAC medium (step {medium_ckpt.step})" if medium_ckpt and not args.policy else f"policy {args.policy}"
+        return episodes, algorithm, f"medium policy, {acting}"
+    if kind == "expert":
+        episodes = rollout(env, sources.expert, args.steps, seed, progress, dataset_id)
+        algorithm = f"SAC expert (step {expert_ckpt.step})" if expert_ckpt and not args.expert_policy else "expert policy"
+        return episodes, algorithm, f"expert policy, {acting}"
+    if kind == "medium-replay":
+        assert sources.sac is not None and medium_ckpt is not None
+        episodes = replay_episodes(sources.sac, medium_ckpt.replay_pos)
+        return episodes, f"SAC replay buffer up to step {medium_ckpt.step}", "SAC replay buffer up to medium"
+    # medium-expert
+    episodes = rollout(env, sources.medium, args.steps, seed, progress, dataset_id + " (medium)")
+    more = rollout(env, sources.expert, args.steps, seed + 500, progress, dataset_id + " (expert)")
+    episodes += [dataclasses.replace(e, id=len(episodes) + i) for i, e in enumerate(more)]
+    return episodes, "medium + expert", f"medium and expert policies concatenated, {acting}"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``sb3-pola collect`` / ``python -m sb3_pola.collect`` (point mazes: :mod:`sb3_pola.collect_maze`)."""
     from sb3_pola import collect_maze
@@ -460,98 +628,25 @@ def main(argv: list[str] | None = None) -> int:
     out_root = datasets_root(args.out)
     name = args.name or default_name(args.env)
     kinds = list(dict.fromkeys(args.kind))
+    dataset_ids = {kind: f"{name}/{kind}-v{args.version}" for kind in kinds}
     progress = not args.no_progress
     start_time = time.perf_counter()
     summary: dict[str, Any] = {"env": args.env, "seed": args.seed}
+    existing = [out_root / d for d in dataset_ids.values() if (out_root / d).exists()]
+    if existing and not args.overwrite:
+        print(f"{existing[0]} exists: pass --overwrite to replace it", file=sys.stderr)
+        return 1
 
-    for kind in kinds:
-        dataset_id = f"{name}/{kind}-v{args.version}"
-        if (out_root / dataset_id).exists() and not args.overwrite:
-            print(f"{out_root / dataset_id} exists: pass --overwrite to replace it", file=sys.stderr)
-            return 1
-
-    needs_medium = any(k in ("medium", "medium-replay", "medium-expert") for k in kinds)
-    needs_expert_data = any(k in ("expert", "medium-expert") for k in kinds)
-    needs_expert = args.ref_max_score is None or needs_expert_data
-    needs_sac = (needs_medium and args.policy is None) or (needs_expert and args.expert_policy is None)
-    needs_sac = needs_sac or "medium-replay" in kinds
-
-    model = None
-    medium_policy: PolicyFn | None = None
-    expert_policy: PolicyFn | None = None
-    medium_ckpt = expert_ckpt = None
-    if needs_sac:
-        sac_kwargs = {} if args.learning_starts is None else {"learning_starts": args.learning_starts}
-        model, checkpoints = train_sac(
-            args.env, args.train_steps, args.seed, args.eval_freq, args.eval_episodes, args.expert_return, progress, sac_kwargs
-        )
-        if not checkpoints:
-            print(f"no SAC checkpoint: --train-steps {args.train_steps} < --eval-freq {args.eval_freq}", file=sys.stderr)
-            return 2
-        summary["sac_steps"] = int(model.num_timesteps)
-        summary["checkpoints"] = [(c.step, round(c.mean_return, 1)) for c in checkpoints]
-        medium_ckpt = pick_medium(checkpoints, args.medium_return, args.medium_max_return)
-        expert_ckpt = max(checkpoints, key=lambda c: c.mean_return)
-        summary["medium_checkpoint"] = {"step": medium_ckpt.step, "eval_return": medium_ckpt.mean_return}
-        summary["expert_checkpoint"] = {"step": expert_ckpt.step, "eval_return": expert_ckpt.mean_return}
-
-    def snapshot(checkpoint: Checkpoint) -> Any:
-        assert model is not None
-        clone = copy.copy(model)
-        clone.policy = copy.deepcopy(model.policy)
-        clone.policy.load_state_dict(checkpoint.policy_state)
-        return clone
-
-    deterministic = args.deterministic
-    if needs_medium:
-        medium_model = load_policy(args.policy, args.policy_algo, env) if args.policy else snapshot(medium_ckpt)  # type: ignore[arg-type]
-        medium_policy = policy_fn(medium_model, deterministic)
-    if needs_expert and (args.expert_policy or expert_ckpt is not None):
-        expert_model = (
-            load_policy(args.expert_policy, args.policy_algo, env) if args.expert_policy else snapshot(expert_ckpt)  # type: ignore[arg-type]
-        )
-        expert_policy = policy_fn(expert_model, deterministic)
-        expert_eval = policy_fn(expert_model, True)
-    if args.save_policies:
-        folder = pathlib.Path(args.save_policies)
-        folder.mkdir(parents=True, exist_ok=True)
-        if needs_medium:
-            medium_model.save(folder / f"{name}-medium")
-        if expert_policy is not None:
-            expert_model.save(folder / f"{name}-expert")
-
-    ref_min = args.ref_min_score
-    if ref_min is None:
-        ref_min = float(np.mean(evaluate(env, None, args.ref_episodes, seed=args.seed + 20_000)))
-    ref_max = args.ref_max_score
-    if ref_max is None:
-        ref_max = float(np.mean(evaluate(env, expert_eval, args.ref_episodes, seed=args.seed + 30_000)))
+    needs_medium, needs_expert, needs_sac = _needs(args, kinds)
+    sources = PolicySources()
+    if needs_sac and not _train_sac_sources(args, progress, sources, summary):
+        return 2
+    _load_policies(args, env, sources, needs_medium, needs_expert)
+    ref_min, ref_max = _reference_scores(args, env, sources.expert_eval)
     summary.update(ref_min_score=ref_min, ref_max_score=ref_max, ref_episodes=args.ref_episodes, datasets={})
 
-    for kind in kinds:
-        dataset_id = f"{name}/{kind}-v{args.version}"
-        seed = args.seed + 1 + KINDS.index(kind) * 1000
-        acting = "deterministic" if deterministic else "stochastic"
-        if kind == "random":
-            episodes = rollout(env, None, args.steps, seed, progress, dataset_id)
-            algorithm, description = "uniform random actions", "uniform random actions"
-        elif kind == "medium":
-            episodes = rollout(env, medium_policy, args.steps, seed, progress, dataset_id)
-            algorithm = f"SAC medium (step {medium_ckpt.step})" if medium_ckpt and not args.policy else f"policy {args.policy}"
-            description = f"medium policy, {acting}"
-        elif kind == "expert":
-            episodes = rollout(env, expert_policy, args.steps, seed, progress, dataset_id)
-            algorithm = f"SAC expert (step {expert_ckpt.step})" if expert_ckpt and not args.expert_policy else "expert policy"
-            description = f"expert policy, {acting}"
-        elif kind == "medium-replay":
-            assert model is not None and medium_ckpt is not None
-            episodes = replay_episodes(model, medium_ckpt.replay_pos)
-            algorithm, description = f"SAC replay buffer up to step {medium_ckpt.step}", "SAC replay buffer up to medium"
-        else:  # medium-expert
-            episodes = rollout(env, medium_policy, args.steps, seed, progress, dataset_id + " (medium)")
-            more = rollout(env, expert_policy, args.steps, seed + 500, progress, dataset_id + " (expert)")
-            episodes += [dataclasses.replace(e, id=len(episodes) + i) for i, e in enumerate(more)]
-            algorithm, description = "medium + expert", f"medium and expert policies concatenated, {acting}"
+    for kind, dataset_id in dataset_ids.items():
+        episodes, algorithm, description = _record_kind(kind, args, env, sources, dataset_id, progress)
         path = write_dataset(
             out_root,
             dataset_id,

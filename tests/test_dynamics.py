@@ -1,8 +1,9 @@
-"""EnsembleDynamics: vectorised forward, fitting, differentiable step, save/load, termination head."""
+"""EnsembleDynamics and DynamicsTrainer: forward, fit and the trainer's pieces, differentiable step, save/load, termination."""
 
 from __future__ import annotations
 
 import io
+import math
 from collections.abc import Iterator
 
 import numpy as np
@@ -10,7 +11,17 @@ import pytest
 import torch as th
 import torch.nn.functional as F
 
-from sb3_pola.common.dynamics import EnsembleDynamics, _split_statistics
+from sb3_pola.common.dynamics import (
+    BootstrapBatches,
+    DynamicsTrainer,
+    EarlyStopping,
+    EnsembleDynamics,
+    Transitions,
+    holdout_scores,
+    holdout_split,
+    select_elites,
+    split_statistics,
+)
 from sb3_pola.common.torch_layers import VectorizedLinear
 
 OBS_DIM, ACT_DIM = 5, 2
@@ -19,7 +30,7 @@ OBS_DIM, ACT_DIM = 5, 2
 @pytest.fixture(autouse=True)
 def _one_thread() -> Iterator[None]:
     """One torch thread per test (pytest runs with -n 2): small matmuls gain nothing from more, and
-    oversubscribed OpenMP threads are an order of magnitude slower on a busy machine. Restored afterwards."""
+    oversubscribed OpenMP threads slow down badly on a busy machine. Restored afterwards."""
     threads = th.get_num_threads()
     th.set_num_threads(1)
     yield
@@ -138,7 +149,8 @@ def test_split_statistics_match_materialised_split() -> None:
     x = th.cat((obs, act), dim=-1)[rows.long()].double()
     y = th.cat((next_obs - obs, rew), dim=-1)[rows.long()].double()
     for chunk_size in (1, 7, 900, 4096):  # merging of uneven chunks, and a single chunk
-        in_mean, in_std, t_mean, t_std = _split_statistics(obs, act, next_obs, rew, rows, chunk_size=chunk_size)
+        stats = split_statistics(obs, act, next_obs, rew, rows, chunk_size=chunk_size)
+        in_mean, in_std, t_mean, t_std = stats.input_mean, stats.input_std, stats.target_mean, stats.target_std
         assert all(t.dtype == th.float32 for t in (in_mean, in_std, t_mean, t_std))
         th.testing.assert_close(in_mean, x.mean(0).float())
         th.testing.assert_close(t_mean, y.mean(0).float())
@@ -147,8 +159,8 @@ def test_split_statistics_match_materialised_split() -> None:
         th.testing.assert_close(in_std, expected_in_std)
         th.testing.assert_close(t_std, y.std(0).float())
     # one row: no spread to measure
-    _, in_std, _, t_std = _split_statistics(obs, act, next_obs, rew, rows[:1])
-    assert (in_std == 1).all() and (t_std == 1).all()
+    stats = split_statistics(obs, act, next_obs, rew, rows[:1])
+    assert (stats.input_std == 1).all() and (stats.target_std == 1).all()
 
 
 def test_fit_leaves_caller_tensors_untouched() -> None:
@@ -170,7 +182,7 @@ def test_early_stopping_and_epoch_cap() -> None:
     data = _synthetic(1500, nonlinear=False)
     th.manual_seed(0)
     model = _small()
-    # 1200 training samples / 64 = 38 steps per pass, capped at 10 per epoch
+    # 1200 training samples / 64: 19 steps per pass, capped at 5 per epoch
     metrics = model.fit(
         data["obs"], data["act"], data["next_obs"], data["rew"], batch_size=64, max_epochs=3, max_epoch_steps=5
     )
@@ -323,3 +335,150 @@ def test_logger_records_dynamics_values() -> None:
     assert len(logger.dumps) == 3  # two epochs + the final summary
     assert "dynamics/holdout_mse" in logger.dumps[0] and "dynamics/no_change_mse" in logger.dumps[0]
     assert "dynamics/fit_time" in logger.dumps[-1]
+
+
+# ---------------------------------------------------------------- the trainer's pieces
+def test_holdout_split_is_one_randperm_draw() -> None:
+    th.manual_seed(3)
+    split = holdout_split(1000, holdout_ratio=0.2, max_holdout=1000)
+    th.manual_seed(3)
+    perm = th.randperm(1000, dtype=th.int32)
+    assert split.train.dtype == th.int32 and split.holdout.dtype == th.long
+    assert th.equal(split.holdout, perm[:200].long()) and th.equal(split.train, perm[200:])
+    assert sorted(th.cat((split.train.long(), split.holdout)).tolist()) == list(range(1000))  # disjoint, complete
+    # the cap, then no room for a holdout: the first training rows stand in for it
+    assert holdout_split(1000, holdout_ratio=0.5, max_holdout=100).holdout.shape == (100,)
+    small = holdout_split(4, holdout_ratio=0.2, max_holdout=3)
+    assert small.train.shape == (4,) and th.equal(small.holdout, small.train[:3].long())
+    with pytest.raises(ValueError, match="not enough transitions"):
+        holdout_split(1, holdout_ratio=1.0, max_holdout=10)
+
+
+def test_bootstrap_batches_walk_each_members_resample_once_per_pass() -> None:
+    th.manual_seed(0)
+    train_rows = th.randperm(200, dtype=th.int32)[:50] + 1000  # rows of the data set, not positions
+    batches = BootstrapBatches(train_rows, n_members=3, batch_size=16)
+    assert batches.steps_per_pass == 4 and batches.bootstrap.shape == (3, 50)
+    assert int(batches.bootstrap.min()) >= 0 and int(batches.bootstrap.max()) < 50
+    assert any(len(set(row.tolist())) < 50 for row in batches.bootstrap)  # drawn with replacement
+    resampled = train_rows[batches.bootstrap.long()].long()  # [3, 50] every member's resample as rows
+    walks = []
+    for seed in (10, 11):  # two passes, each a fresh permutation of the same resample
+        th.manual_seed(seed)
+        rows = [batches.next_rows() for _ in range(batches.steps_per_pass)]
+        assert [r.shape for r in rows] == [(3, 16)] * 3 + [(3, 2)]
+        walked = th.cat(rows, dim=1)  # [3, 50]
+        th.manual_seed(seed)
+        perm = th.randperm(50, dtype=th.int32).long()  # the pass's one draw, shared by the members
+        assert th.equal(walked, resampled[:, perm])
+        walks.append(walked)
+    assert not th.equal(walks[0], walks[1])
+
+
+def test_early_stopping_keeps_each_members_best_weights() -> None:
+    th.manual_seed(0)
+    model = _small()  # 4 members
+    first = [p.detach().clone() for p in EarlyStopping(model, patience=2).member_params]
+    stopping = EarlyStopping(model, patience=2)
+    assert not stopping.update(th.full((4,), float("inf"))).any()  # no improvement on inf
+    assert stopping.update(th.ones(4)).all() and stopping.epochs_since_improvement == 0
+    with th.no_grad():
+        for p in stopping.member_params:
+            p.add_(1.0)  # every member moves
+    improved = stopping.update(th.tensor([0.995, 0.9, 1.0, 2.0]))  # only member 1 improves by more than 1%
+    assert improved.tolist() == [False, True, False, False]
+    assert stopping.best.tolist() == pytest.approx([1.0, 0.9, 1.0, 1.0])
+    assert stopping.epochs_since_improvement == 0 and not stopping.should_stop
+    moved = [p.detach().clone() for p in stopping.member_params]
+    with th.no_grad():
+        for p in stopping.member_params:
+            p.add_(1.0)
+    stopping.update(th.tensor([0.995, 0.895, 0.991, 0.991]))
+    assert stopping.epochs_since_improvement == 1 and not stopping.should_stop
+    stopping.update(th.ones(4))
+    assert stopping.epochs_since_improvement == 2 and stopping.should_stop
+    stopping.restore_best()
+    for p, old, new in zip(stopping.member_params, first, moved, strict=True):
+        assert th.equal(p[1], new[1])  # member 1: the weights of its best epoch
+        for member in (0, 2, 3):  # the others: the weights they had at their best (first) epoch
+            assert th.equal(p[member], old[member])
+
+
+def test_select_elites_takes_the_lowest_scores_in_index_order() -> None:
+    elites = select_elites(th.tensor([0.3, 0.1, 0.5, 0.2, 0.4]), 3)
+    assert elites.dtype == th.long and elites.tolist() == [0, 1, 3]
+    assert select_elites(th.tensor([2.0, 1.0]), 1).tolist() == [1]
+
+
+def test_holdout_scores_per_member() -> None:
+    th.manual_seed(0)
+    model = _small(learn_termination=True)
+    data = _synthetic(300, nonlinear=True)
+    transitions = Transitions.from_arrays(model, data["obs"], data["act"], data["next_obs"], data["rew"], data["done"])
+    rows = th.arange(300)
+    stats = split_statistics(transitions.observations, transitions.actions, transitions.next_observations,
+                             transitions.rewards, rows)  # fmt: skip
+    model.set_normalization(stats)
+    assert not th.allclose(model.target_std, th.ones_like(model.target_std))
+    x, y = transitions.standardized(rows, stats)
+    th.testing.assert_close(x, model.normalize_inputs(data["obs"], data["act"]))
+    done = transitions.done_rows(rows)
+    assert done is not None
+    mse, score, raw_state_mse = holdout_scores(model, x, y, done)
+    with th.no_grad():
+        mean, _, logit = model(data["obs"], data["act"])  # [E, H, D], [E, H]
+    assert logit is not None
+    raw_err = mean * model.target_std + model.target_mean - th.cat((data["next_obs"] - data["obs"], data["rew"][:, None]), -1)
+    p = th.sigmoid(logit)
+    bce = -(done * th.log(p) + (1 - done) * th.log(1 - p)).mean(dim=1)
+    for m in range(model.n_members):
+        th.testing.assert_close(mse[m], ((mean[m] - y) ** 2).mean())
+        th.testing.assert_close(raw_state_mse[m], (raw_err[m, :, :OBS_DIM] ** 2).mean(), rtol=1e-4, atol=1e-6)
+        th.testing.assert_close(score[m], mse[m] + bce[m], rtol=1e-4, atol=1e-6)
+    _, score_without_head, _ = holdout_scores(model, x, y, None)
+    assert th.equal(score_without_head, mse)
+
+
+def test_transitions_use_the_callers_float32_tensors() -> None:
+    model = _small()
+    data = _synthetic(50, nonlinear=False)
+    transitions = Transitions.from_arrays(model, data["obs"], data["act"], data["next_obs"], data["rew"], data["done"])
+    assert transitions.observations.data_ptr() == data["obs"].data_ptr()  # no copy
+    assert transitions.rewards.shape == (50, 1) and transitions.dones is None  # no head: dones dropped
+    assert transitions.done_rows(th.arange(3)) is None and len(transitions) == 50
+    as_numpy = Transitions.from_arrays(model, *(data[k].numpy().astype(np.float64) for k in ("obs", "act", "next_obs", "rew")))
+    assert as_numpy.observations.dtype == th.float32
+    th.testing.assert_close(as_numpy.next_observations, data["next_obs"])
+
+
+def test_train_epoch_takes_its_steps() -> None:
+    th.manual_seed(0)
+    model = _small()
+    data = _synthetic(400, nonlinear=True)
+    transitions = Transitions.from_arrays(model, data["obs"], data["act"], data["next_obs"], data["rew"])
+    split = holdout_split(len(transitions), 0.2, 1000)
+    stats = split_statistics(data["obs"], data["act"], data["next_obs"], transitions.rewards, split.train)
+    trainer = DynamicsTrainer(model, batch_size=32)
+    before = [p.detach().clone() for p in model.parameters()]
+    loss = trainer.train_epoch(transitions, stats, BootstrapBatches(split.train, model.n_members, 32), n_steps=3)
+    assert math.isfinite(loss)
+    assert all(int(state["step"]) == 3 for state in trainer.optimizer.state.values())
+    assert all(not th.equal(p, b) for p, b in zip(model.parameters(), before, strict=True))
+    assert trainer.train_epoch(transitions, stats, BootstrapBatches(split.train, model.n_members, 32), n_steps=0) == 0.0
+
+
+def test_fit_elites_are_the_best_final_holdout_scores() -> None:
+    data = _synthetic(600, nonlinear=True)
+    model = EnsembleDynamics(OBS_DIM, ACT_DIM, n_members=6, n_elites=2, hidden_dim=32, n_layers=2)
+    th.manual_seed(5)
+    metrics = DynamicsTrainer(model, max_epochs=4, batch_size=64).fit(data["obs"], data["act"], data["next_obs"], data["rew"])
+    th.manual_seed(5)
+    split = holdout_split(600, 0.2, 1000)  # the fit's first draw: the same split
+    transitions = Transitions.from_arrays(model, data["obs"], data["act"], data["next_obs"], data["rew"])
+    stats = split_statistics(data["obs"], data["act"], data["next_obs"], transitions.rewards, split.train)
+    th.testing.assert_close(stats.target_std, model.target_std, rtol=0, atol=0)
+    mse, score, _ = holdout_scores(model, *transitions.standardized(split.holdout, stats), None)
+    assert len(set(score.tolist())) == 6  # distinct scores: the elites are unambiguous
+    assert model.elites.tolist() == th.argsort(score)[:2].sort().values.tolist()
+    assert metrics["holdout_norm_mse"] == pytest.approx(float(mse[model.elites].mean()))
+    assert not model.training and all(p.requires_grad for p in model.parameters())

@@ -84,7 +84,7 @@ def bench_step(batch_size: int = 256, repeats: int = 50) -> dict[str, float]:
 def run(quick: bool = False, max_epochs: int | None = None) -> dict[str, Any]:
     """Run the benchmark.
 
-    :param quick: 10k transitions, 2 epochs (seconds) instead of 100k (5 epochs) and 1M (3 epochs) (minutes)
+    :param quick: 10k transitions, 2 epochs, instead of 100k (5 epochs) and 1M (3 epochs)
     :param max_epochs: override the epoch cap of every size
     :return: ``{"fit": [per-size metrics], "step": step costs, "threads": torch threads,
         "load_before" / "load_after": 1-minute load average (other processes distort the timings)}``

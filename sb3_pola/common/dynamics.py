@@ -1,10 +1,15 @@
-"""Probabilistic ensemble dynamics model ``p_psi(s', r | s, a)`` for POLA's look-ahead (paper, section IV).
+"""Probabilistic ensemble dynamics model ``p_psi(s', r | s, a)`` for POLA's look-ahead (paper, section IV), and its trainer.
 
-The recipe is the one of MOPO / MOBILE / COMBO as in OfflineRL-Kit (our own code): ``E`` Gaussian MLPs over
-``[delta_s, r]`` evaluated as one set of batched matmuls, soft-bounded log-variances, bootstrap resamples,
-holdout early stopping and elite selection. Unlike those implementations, the prediction path (:meth:`step`)
-is pure torch and differentiable with respect to its inputs, so that the policy gradient can flow through
-``s_{t+1} = p_psi(s_t, pi(s_t))`` with the model's weights frozen.
+The recipe is the one of MOPO / MOBILE / COMBO as in OfflineRL-Kit (our own code), split the same way:
+
+- :class:`EnsembleDynamics` is the model: ``E`` Gaussian MLPs over ``[delta_s, r]`` evaluated as one set of
+  batched matmuls, soft-bounded log-variances, the normalisation statistics and the elite members. Unlike
+  those implementations, its prediction path (:meth:`EnsembleDynamics.step`) is pure torch and differentiable
+  with respect to its inputs, so that the policy gradient can flow through ``s_{t+1} = p_psi(s_t, pi(s_t))``
+  with the model's weights frozen.
+- :class:`DynamicsTrainer` fits it: holdout split, normalisation statistics, bootstrap resamples and epochs,
+  per-member holdout scores, early stopping and elite selection, each a small piece of its own below.
+  :meth:`EnsembleDynamics.fit` is the shorthand the algorithm calls.
 
 Choices where the recipe is silent:
 
@@ -21,7 +26,8 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 import torch as th
@@ -31,7 +37,10 @@ from torch import nn
 from sb3_pola.common.torch_layers import VectorizedLinear, vectorized_mlp
 
 if TYPE_CHECKING:
+    from typing import Unpack
+
     from stable_baselines3.common.logger import Logger
+    from tqdm import tqdm
 
 # Per-layer L2 coefficients of the reference recipe (4 hidden layers + output layer).
 DEFAULT_WEIGHT_DECAYS = (2.5e-5, 5e-5, 7.5e-5, 7.5e-5, 1e-4)
@@ -48,50 +57,6 @@ def default_weight_decays(n_layers: int) -> tuple[float, ...]:
     """
     hidden = DEFAULT_WEIGHT_DECAYS[:-1]
     return (*(hidden[min(i, len(hidden) - 1)] for i in range(n_layers)), DEFAULT_WEIGHT_DECAYS[-1])
-
-
-def _split_statistics(
-    obs: th.Tensor, act: th.Tensor, next_obs: th.Tensor, rew: th.Tensor, rows: th.Tensor, chunk_size: int = 4096
-) -> tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]:
-    """Column mean and std of the inputs ``[s, a]`` and the targets ``[s' - s, r]`` over the transitions ``rows``.
-
-    The std is the unbiased one, with 1 for (near-)constant columns and for a single row. The split is gathered
-    chunk by chunk (never copied whole); the chunks' float32 moments are merged in float64 with Chan et al.'s
-    pairwise update, so the result equals the float32 statistics of the materialised split up to rounding.
-
-    :param obs: ``[N, obs_dim]``
-    :param act: ``[N, action_dim]``
-    :param next_obs: ``[N, obs_dim]``
-    :param rew: ``[N, 1]``
-    :param rows: indices of the split ``[M]``
-    :param chunk_size: rows gathered at a time (small: large temporaries of a loop leave glibc's heap grown)
-    :return: input mean and std ``[obs_dim + action_dim]``, target mean and std ``[obs_dim + 1]`` (float32)
-    """
-    n_in = obs.shape[1] + act.shape[1]
-    count = 0
-    mean = th.zeros(n_in + obs.shape[1] + 1, dtype=th.float64, device=obs.device)
-    m2 = th.zeros_like(mean)  # sum of squared deviations from the mean
-    for start in range(0, rows.shape[0], chunk_size):
-        idx = rows[start : start + chunk_size]
-        obs_rows = obs.index_select(0, idx)
-        chunk = th.cat(
-            (obs_rows, act.index_select(0, idx), next_obs.index_select(0, idx) - obs_rows, rew.index_select(0, idx)), dim=-1
-        )  # [c, in + D]
-        c = chunk.shape[0]
-        c_var, c_mean_32 = th.var_mean(chunk, dim=0, correction=0)
-        c_mean, c_m2 = c_mean_32.double(), c_var.double() * c
-        delta = c_mean - mean
-        total = count + c
-        mean = mean + delta * (c / total)
-        m2 = m2 + c_m2 + delta**2 * (count * c / total)
-        count = total
-    if count > 1:
-        std = (m2 / (count - 1)).sqrt().float()
-        std = th.where(std < 1e-6, th.ones_like(std), std)
-    else:
-        std = th.ones_like(mean, dtype=th.float32)
-    mean = mean.float()
-    return mean[:n_in], std[:n_in], mean[n_in:], std[n_in:]
 
 
 MEAN_LOSSES = ("nll", "beta_nll", "mse")
@@ -271,10 +236,39 @@ class EnsembleDynamics(nn.Module):
         self.eval()
         return self
 
+    @th.no_grad()
+    def set_normalization(self, stats: NormalizationStats) -> None:
+        """Standardise inputs and targets with these statistics from now on.
+
+        :param stats: statistics of the training split (:func:`split_statistics`)
+        """
+        self.obs_mean.copy_(stats.input_mean[: self.obs_dim])
+        self.obs_std.copy_(stats.input_std[: self.obs_dim])
+        self.act_mean.copy_(stats.input_mean[self.obs_dim :])
+        self.act_std.copy_(stats.input_std[self.obs_dim :])
+        self.target_mean.copy_(stats.target_mean)
+        self.target_std.copy_(stats.target_std)
+
+    @th.no_grad()
+    def set_elites(self, elites: th.Tensor) -> None:
+        """Make these members the ones :meth:`step` uses.
+
+        :param elites: member indices ``[n_elites]``
+        """
+        self.elites.copy_(elites)
+
     def _loss(
         self, mean: th.Tensor, logvar: th.Tensor, logit: th.Tensor | None, y: th.Tensor, done: th.Tensor | None
     ) -> th.Tensor:
-        """Gaussian NLL (or its ``mean_loss`` form) summed over members + L2 weight decay + log-variance bounds (+ BCE)."""
+        """Gaussian NLL (or its ``mean_loss`` form) summed over members + L2 weight decay + log-variance bounds (+ BCE).
+
+        :param mean: members' means in the normalised target space ``[E, b, D]``
+        :param logvar: their bounded log-variances ``[E, b, D]``
+        :param logit: termination logits ``[E, b]`` or None
+        :param y: standardised targets ``[E, b, D]``
+        :param done: termination flags ``[E, b]`` or None
+        :return: the scalar training loss
+        """
         inv_var = th.exp(-logvar)
         sq_err = (mean - y) ** 2  # [E, b, D]
         if self.mean_loss == "nll":
@@ -291,25 +285,6 @@ class EnsembleDynamics(nn.Module):
             loss = loss + F.binary_cross_entropy_with_logits(logit, done, reduction="none").mean(dim=1).sum()
         return loss
 
-    @th.no_grad()
-    def _holdout_scores(self, x: th.Tensor, y: th.Tensor, done: th.Tensor | None) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
-        """Per-member holdout error.
-
-        :param x: standardised holdout inputs ``[H, in]``
-        :param y: standardised holdout targets ``[H, D]``
-        :param done: holdout termination flags ``[H]`` or None
-        :return: normalised-target MSE ``[E]``, the early-stopping score ``[E]`` (MSE + BCE with a head)
-            and the raw next-state MSE ``[E]``
-        """
-        mean, _, logit = self._forward(x.unsqueeze(0).expand(self.n_members, -1, -1))  # [E, H, D]
-        err = mean - y  # [E, H, D]
-        mse = (err**2).mean(dim=(1, 2))  # [E]
-        raw_state_mse = ((err * self.target_std)[..., : self.obs_dim] ** 2).mean(dim=(1, 2))  # [E]
-        score = mse
-        if logit is not None and done is not None:
-            score = mse + F.binary_cross_entropy_with_logits(logit, done.expand_as(logit), reduction="none").mean(dim=1)
-        return mse, score, raw_state_mse
-
     def fit(
         self,
         observations: th.Tensor | np.ndarray,
@@ -317,6 +292,387 @@ class EnsembleDynamics(nn.Module):
         next_observations: th.Tensor | np.ndarray,
         rewards: th.Tensor | np.ndarray,
         dones: th.Tensor | np.ndarray | None = None,
+        **trainer_kwargs: Unpack[TrainerOptions],
+    ) -> dict[str, float]:
+        """Fit the ensemble with a fresh :class:`DynamicsTrainer`, then pick the elites (see :meth:`DynamicsTrainer.fit`).
+
+        :param observations: ``[N, obs_dim]``
+        :param actions: ``[N, action_dim]``
+        :param next_observations: ``[N, obs_dim]`` (the episode's own next observations)
+        :param rewards: ``[N]``
+        :param dones: ``[N]`` termination flags, true terminations only, not time-limit truncations
+            (needed with ``learn_termination``, ignored otherwise)
+        :param trainer_kwargs: options of :class:`DynamicsTrainer` (``batch_size``, ``max_epochs``, ``patience``, ...)
+        :return: the fit's holdout metrics (:meth:`DynamicsTrainer.fit`)
+        """
+        return DynamicsTrainer(self, **trainer_kwargs).fit(observations, actions, next_observations, rewards, dones)
+
+
+# ---------------------------------------------------------------------- trainer
+class TrainerOptions(TypedDict, total=False):
+    """Keyword options of :class:`DynamicsTrainer` (what ``dynamics_fit_kwargs`` may hold)."""
+
+    batch_size: int
+    learning_rate: float
+    holdout_ratio: float
+    max_holdout: int
+    max_epochs: int | None
+    max_steps: int | None
+    patience: int
+    max_epoch_steps: int | None
+    progress_bar: bool
+    logger: Logger | None
+    verbose: int
+
+
+@dataclass(frozen=True)
+class NormalizationStats:
+    """Column means and stds of the inputs ``[s, a]`` and the targets ``[s' - s, r]`` (float32).
+
+    :param input_mean: ``[obs_dim + action_dim]``
+    :param input_std: ``[obs_dim + action_dim]``
+    :param target_mean: ``[obs_dim + 1]``
+    :param target_std: ``[obs_dim + 1]``
+    """
+
+    input_mean: th.Tensor
+    input_std: th.Tensor
+    target_mean: th.Tensor
+    target_std: th.Tensor
+
+
+@dataclass(frozen=True)
+class Transitions:
+    """The transitions of a fit as float32 tensors on the model's device.
+
+    :meth:`from_arrays` converts without copying what is one already; nothing here modifies the tensors.
+
+    :param observations: ``[N, obs_dim]``
+    :param actions: ``[N, action_dim]``
+    :param next_observations: ``[N, obs_dim]``
+    :param rewards: ``[N, 1]``
+    :param dones: ``[N]`` termination flags, or None (no termination head)
+    """
+
+    observations: th.Tensor
+    actions: th.Tensor
+    next_observations: th.Tensor
+    rewards: th.Tensor
+    dones: th.Tensor | None
+
+    @classmethod
+    def from_arrays(
+        cls,
+        model: EnsembleDynamics,
+        observations: th.Tensor | np.ndarray,
+        actions: th.Tensor | np.ndarray,
+        next_observations: th.Tensor | np.ndarray,
+        rewards: th.Tensor | np.ndarray,
+        dones: th.Tensor | np.ndarray | None = None,
+    ) -> Transitions:
+        """The caller's arrays in the model's shapes, dtype and device; ``dones`` kept only for a termination head.
+
+        :param model: the model to fit
+        :param observations: ``[N, obs_dim]``
+        :param actions: ``[N, action_dim]``
+        :param next_observations: ``[N, obs_dim]``
+        :param rewards: ``[N]`` or ``[N, 1]``
+        :param dones: ``[N]`` or ``[N, 1]``; required with ``learn_termination``
+        :return: the transitions
+        """
+        if model.learn_termination and dones is None:
+            raise ValueError("learn_termination=True needs dones")
+        device = model.obs_mean.device
+
+        def as_tensor(a: th.Tensor | np.ndarray) -> th.Tensor:
+            return th.as_tensor(a, dtype=th.float32, device=device)
+
+        obs = as_tensor(observations).reshape(-1, model.obs_dim)
+        n = obs.shape[0]
+        act = as_tensor(actions).reshape(n, model.action_dim)
+        next_obs = as_tensor(next_observations).reshape(n, model.obs_dim)
+        rew = as_tensor(rewards).reshape(n, 1)
+        done = as_tensor(dones).reshape(n) if (model.learn_termination and dones is not None) else None
+        return cls(obs, act, next_obs, rew, done)
+
+    def __len__(self) -> int:
+        return self.observations.shape[0]
+
+    def standardized(self, rows: th.Tensor, stats: NormalizationStats) -> tuple[th.Tensor, th.Tensor]:
+        """Standardised inputs and targets of the transitions ``rows``, gathered from the tensors (which stay as they are).
+
+        :param rows: transition indices, any shape ``[...]``
+        :param stats: the normalisation statistics
+        :return: inputs ``[..., obs_dim + action_dim]`` and targets ``[..., obs_dim + 1]``
+        """
+        obs_rows = self.observations[rows]
+        x = (th.cat((obs_rows, self.actions[rows]), dim=-1) - stats.input_mean) / stats.input_std
+        y = (
+            th.cat((self.next_observations[rows] - obs_rows, self.rewards[rows]), dim=-1) - stats.target_mean
+        ) / stats.target_std
+        return x, y
+
+    def done_rows(self, rows: th.Tensor) -> th.Tensor | None:
+        """Termination flags of the transitions ``rows`` (None without a termination head).
+
+        :param rows: transition indices
+        :return: flags of the shape of ``rows``, or None
+        """
+        return self.dones[rows] if self.dones is not None else None
+
+
+@dataclass(frozen=True)
+class HoldoutSplit:
+    """Indices of the training and holdout transitions (only indices: the data are never copied).
+
+    :param train: training rows ``[N_train]``, int32 where the row count fits (same draws as int64), a view of
+        the permutation
+    :param holdout: holdout rows ``[H]`` (int64)
+    """
+
+    train: th.Tensor
+    holdout: th.Tensor
+
+
+def holdout_split(n: int, holdout_ratio: float, max_holdout: int, device: th.device | str = "cpu") -> HoldoutSplit:
+    """Hold out a random ``min(holdout_ratio * n, max_holdout)`` of ``n`` transitions (one ``randperm`` draw).
+
+    With no room for a holdout, the first ``max_holdout`` training rows stand in for it, so that the scores
+    are measured on (part of) the training data.
+
+    :param n: number of transitions
+    :param holdout_ratio: fraction held out
+    :param max_holdout: maximum holdout size
+    :param device: device of the indices
+    :return: the split
+    """
+    n_holdout = min(int(n * holdout_ratio), max_holdout)
+    if n - n_holdout < 1:
+        raise ValueError(f"not enough transitions to fit ({n})")
+    index_dtype = th.int32 if n <= th.iinfo(th.int32).max else th.long
+    perm = th.randperm(n, device=device, dtype=index_dtype)
+    holdout, train = perm[:n_holdout].long(), perm[n_holdout:]
+    if n_holdout == 0:
+        holdout = train[:max_holdout].long()
+    return HoldoutSplit(train=train, holdout=holdout)
+
+
+def split_statistics(
+    obs: th.Tensor, act: th.Tensor, next_obs: th.Tensor, rew: th.Tensor, rows: th.Tensor, chunk_size: int = 4096
+) -> NormalizationStats:
+    """Column mean and std of the inputs ``[s, a]`` and the targets ``[s' - s, r]`` over the transitions ``rows``.
+
+    The std is the unbiased one, with 1 for (near-)constant columns and for a single row. The split is gathered
+    chunk by chunk (never copied whole); the chunks' float32 moments are merged in float64 with Chan et al.'s
+    pairwise update, so the result equals the float32 statistics of the materialised split up to rounding.
+
+    :param obs: ``[N, obs_dim]``
+    :param act: ``[N, action_dim]``
+    :param next_obs: ``[N, obs_dim]``
+    :param rew: ``[N, 1]``
+    :param rows: indices of the split ``[M]``
+    :param chunk_size: rows gathered at a time (small: large temporaries of a loop leave glibc's heap grown)
+    :return: input mean and std ``[obs_dim + action_dim]``, target mean and std ``[obs_dim + 1]`` (float32)
+    """
+    n_in = obs.shape[1] + act.shape[1]
+    count = 0
+    mean = th.zeros(n_in + obs.shape[1] + 1, dtype=th.float64, device=obs.device)
+    m2 = th.zeros_like(mean)  # sum of squared deviations from the mean
+    for start in range(0, rows.shape[0], chunk_size):
+        idx = rows[start : start + chunk_size]
+        obs_rows = obs.index_select(0, idx)
+        chunk = th.cat(
+            (obs_rows, act.index_select(0, idx), next_obs.index_select(0, idx) - obs_rows, rew.index_select(0, idx)), dim=-1
+        )  # [c, in + D]
+        c = chunk.shape[0]
+        c_var, c_mean_32 = th.var_mean(chunk, dim=0, correction=0)
+        c_mean, c_m2 = c_mean_32.double(), c_var.double() * c
+        delta = c_mean - mean
+        total = count + c
+        mean = mean + delta * (c / total)
+        m2 = m2 + c_m2 + delta**2 * (count * c / total)
+        count = total
+    if count > 1:
+        std = (m2 / (count - 1)).sqrt().float()
+        std = th.where(std < 1e-6, th.ones_like(std), std)
+    else:
+        std = th.ones_like(mean, dtype=th.float32)
+    mean = mean.float()
+    return NormalizationStats(mean[:n_in], std[:n_in], mean[n_in:], std[n_in:])
+
+
+class BootstrapBatches:
+    """Minibatches of every member's own bootstrap resample of the training split, all members at once.
+
+    The resample (``[E, N_train]`` positions in the training split, drawn in place in the index dtype: the
+    same values as ``th.randint``'s int64) is fixed for the whole fit. A *pass* walks through one random
+    permutation of the resamples' columns in ``batch_size`` steps: the members' resamples are independent,
+    so one permutation shuffles them all. The first permutation is drawn at the first batch.
+
+    :param train_rows: indices of the training split ``[N_train]``
+    :param n_members: ensemble size ``E``
+    :param batch_size: minibatch size per member
+    """
+
+    def __init__(self, train_rows: th.Tensor, n_members: int, batch_size: int) -> None:
+        self.train_rows = train_rows
+        self.batch_size = batch_size
+        self.n_train = train_rows.shape[0]
+        self.steps_per_pass = math.ceil(self.n_train / batch_size)
+        dtype, device = train_rows.dtype, train_rows.device
+        self.bootstrap = th.empty((n_members, self.n_train), dtype=dtype, device=device).random_(0, self.n_train)
+        self._pass_perm = th.empty(0, dtype=dtype, device=device)
+        self._cursor = self.steps_per_pass  # forces a shuffle at the first batch
+
+    def next_rows(self) -> th.Tensor:
+        """The transitions of the next minibatch, a new pass when the last one is through.
+
+        :return: transition indices ``[E, b]`` (``b = batch_size``, less at the end of a pass)
+        """
+        if self._cursor >= self.steps_per_pass:
+            self._pass_perm = th.randperm(self.n_train, device=self.train_rows.device, dtype=self.train_rows.dtype)
+            self._cursor = 0
+        cols = self._pass_perm[self._cursor * self.batch_size : (self._cursor + 1) * self.batch_size]  # [b]
+        self._cursor += 1
+        return self.train_rows[self.bootstrap[:, cols].long()].long()  # [E, b]
+
+
+@th.no_grad()
+def holdout_scores(
+    model: EnsembleDynamics, x: th.Tensor, y: th.Tensor, done: th.Tensor | None
+) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+    """Per-member holdout errors of every member's Gaussian mean.
+
+    :param model: the ensemble
+    :param x: standardised holdout inputs ``[H, in]``
+    :param y: standardised holdout targets ``[H, D]``
+    :param done: holdout termination flags ``[H]`` or None
+    :return: normalised-target MSE ``[E]``, the early-stopping score ``[E]`` (the MSE, + the BCE with a
+        termination head) and the next-state MSE in raw units ``[E]``
+    """
+    mean, _, logit = model._forward(x.unsqueeze(0).expand(model.n_members, -1, -1))  # [E, H, D]
+    err = mean - y  # [E, H, D]
+    mse = (err**2).mean(dim=(1, 2))  # [E]
+    raw_state_mse = ((err * model.target_std)[..., : model.obs_dim] ** 2).mean(dim=(1, 2))  # [E]
+    score = mse
+    if logit is not None and done is not None:
+        score = mse + F.binary_cross_entropy_with_logits(logit, done.expand_as(logit), reduction="none").mean(dim=1)
+    return mse, score, raw_state_mse
+
+
+class EarlyStopping:
+    """Holdout early stopping per member, keeping each member's best weights.
+
+    After every epoch, a member whose holdout score improved by more than 1% on its best keeps a snapshot
+    of its weights (the linear layers; the shared log-variance bounds are not per member). Training stops
+    after ``patience`` epochs without such an improvement of any member.
+
+    :param model: the ensemble being fitted (snapshots are taken at construction)
+    :param patience: epochs without an improvement before :attr:`should_stop`
+    """
+
+    def __init__(self, model: EnsembleDynamics, patience: int) -> None:
+        self.patience = patience
+        self.member_params = [p for layer in model.linear_layers for p in (layer.weight, layer.bias)]
+        self.snapshots = [p.detach().clone() for p in self.member_params]
+        self.best = th.full((model.n_members,), float("inf"), device=model.obs_mean.device)
+        self.epochs_since_improvement = 0
+
+    @th.no_grad()
+    def update(self, score: th.Tensor) -> th.Tensor:
+        """Record an epoch's scores; snapshot the members that improved.
+
+        :param score: holdout score per member ``[E]`` (lower is better)
+        :return: which members improved ``[E]`` (bool)
+        """
+        improved = score < self.best * 0.99  # relative improvement > 1%
+        self.best = th.where(improved, score, self.best)
+        for snap, p in zip(self.snapshots, self.member_params, strict=True):
+            snap.copy_(th.where(improved.view(-1, 1, 1), p, snap))
+        self.epochs_since_improvement = 0 if bool(improved.any()) else self.epochs_since_improvement + 1
+        return improved
+
+    @property
+    def should_stop(self) -> bool:
+        """``patience`` epochs in a row without an improvement of any member."""
+        return self.epochs_since_improvement >= self.patience
+
+    @th.no_grad()
+    def restore_best(self) -> None:
+        """Give every member back the weights of its best epoch."""
+        for snap, p in zip(self.snapshots, self.member_params, strict=True):
+            p.copy_(snap)
+
+
+def select_elites(score: th.Tensor, n_elites: int) -> th.Tensor:
+    """The ``n_elites`` members of lowest holdout score, in increasing index order.
+
+    :param score: holdout score per member ``[E]``
+    :param n_elites: number of elites
+    :return: member indices ``[n_elites]`` (int64)
+    """
+    return th.sort(th.argsort(score)[:n_elites]).values
+
+
+@th.no_grad()
+def holdout_errors(model: EnsembleDynamics, data: Transitions, rows: th.Tensor) -> dict[str, float]:
+    """Raw-space errors of the deterministic :meth:`EnsembleDynamics.step` (the elites' mean) on the transitions ``rows``.
+
+    :param model: the fitted ensemble
+    :param data: the transitions
+    :param rows: the holdout rows
+    :return: ``holdout_mse`` (next state), ``no_change_mse`` (the same for ``s' = s``), ``holdout_reward_mse``,
+        and ``holdout_term_acc`` with a termination head
+    """
+    obs, next_obs = data.observations[rows], data.next_observations[rows]
+    pred_obs, pred_rew, pred_term, _ = model.step(obs, data.actions[rows], deterministic=True)
+    metrics = {
+        "holdout_mse": float(((pred_obs - next_obs) ** 2).mean()),
+        "no_change_mse": float(((obs - next_obs) ** 2).mean()),
+        "holdout_reward_mse": float(((pred_rew - data.rewards[rows, 0]) ** 2).mean()),
+    }
+    done = data.done_rows(rows)
+    if done is not None:
+        metrics["holdout_term_acc"] = float(((pred_term > 0.5).float() == done).float().mean())
+    return metrics
+
+
+class DynamicsTrainer:
+    """Fits an :class:`EnsembleDynamics` on transitions with holdout early stopping, then picks the elites.
+
+    A random ``min(holdout_ratio * N, max_holdout)`` transitions are held out (:func:`holdout_split`);
+    normalisation statistics come from the rest (:func:`split_statistics`). Every member trains on its own
+    bootstrap resample of the training split (:class:`BootstrapBatches`), all members in one batched forward
+    per Adam step. An *epoch* is one pass over the resample, capped at ``max_epoch_steps`` gradient steps (so
+    that 1M transitions give epochs of 1000 steps, not 3,900); after every epoch each member's holdout score
+    is measured (:func:`holdout_scores`) and :class:`EarlyStopping` keeps the best weights of every member and
+    stops after ``patience`` epochs without an improvement of any member (or at ``max_epochs`` / ``max_steps``).
+    Each member ends with its best weights; the ``n_elites`` best holdout members become the elites
+    (:func:`select_elites`).
+
+    Memory: the data are not copied (float32 tensors on the model's device are used as they are); the fit keeps
+    index tensors (int32 split permutation and ``[E, N]`` bootstrap) and gathers and standardises each minibatch
+    from the caller's tensors, which it never modifies. All randomness comes from torch's global RNG:
+    ``th.manual_seed`` makes a fit reproducible. The Adam state lives in the trainer: a second :meth:`fit` of
+    the same trainer continues from it (:meth:`EnsembleDynamics.fit` builds a fresh trainer every time).
+
+    :param model: the ensemble to fit
+    :param batch_size: minibatch size per member
+    :param learning_rate: Adam learning rate
+    :param holdout_ratio: fraction of the data held out for early stopping
+    :param max_holdout: maximum holdout size
+    :param max_epochs: stop after this many epochs (``None``: early stopping only)
+    :param max_steps: stop after this many gradient steps in total (``None``: no limit)
+    :param patience: epochs without a >1% improvement of any member before stopping
+    :param max_epoch_steps: cap on the gradient steps of one epoch (``None``: a full pass)
+    :param progress_bar: show a tqdm bar over epochs
+    :param logger: SB3 logger; ``dynamics/*`` values are recorded and dumped after every epoch
+    :param verbose: 1: a summary line at the end, 2: a line per epoch
+    """
+
+    def __init__(
+        self,
+        model: EnsembleDynamics,
         *,
         batch_size: int = 256,
         learning_rate: float = 1e-3,
@@ -325,26 +681,37 @@ class EnsembleDynamics(nn.Module):
         max_epochs: int | None = None,
         max_steps: int | None = None,
         patience: int = 5,
+        max_epoch_steps: int | None = 1000,
         progress_bar: bool = False,
         logger: Logger | None = None,
         verbose: int = 0,
-        max_epoch_steps: int | None = 1000,
+    ) -> None:
+        self.model = model
+        self.batch_size = batch_size
+        self.holdout_ratio = holdout_ratio
+        self.max_holdout = max_holdout
+        self.max_epochs = max_epochs
+        self.max_steps = max_steps
+        self.patience = patience
+        self.max_epoch_steps = max_epoch_steps
+        self.progress_bar = progress_bar
+        self.logger = logger
+        self.verbose = verbose
+        self.optimizer = th.optim.Adam(model.parameters(), lr=learning_rate)
+        self._pbar: tqdm | None = None
+
+    def fit(
+        self,
+        observations: th.Tensor | np.ndarray,
+        actions: th.Tensor | np.ndarray,
+        next_observations: th.Tensor | np.ndarray,
+        rewards: th.Tensor | np.ndarray,
+        dones: th.Tensor | np.ndarray | None = None,
     ) -> dict[str, float]:
         """Train the ensemble on transitions, with holdout early stopping, then pick the elites.
 
-        A random ``min(holdout_ratio * N, max_holdout)`` transitions are held out; normalisation statistics
-        come from the rest. Every member trains on its own bootstrap resample of the training split (fixed
-        for the whole fit), all members in one batched forward per Adam step. An *epoch* is one pass over
-        the resample, capped at ``max_epoch_steps`` gradient steps (so that 1M transitions give epochs of
-        1000 steps, not 3,900); after every epoch each member's holdout MSE is measured, a member whose MSE
-        improved by more than 1% keeps a snapshot of its weights, and training stops after ``patience``
-        epochs without such an improvement of any member (or at ``max_epochs`` / ``max_steps``). Each member
-        ends with its best weights; the ``n_elites`` best holdout members become the elites.
-        Memory: the data are not copied (float32 tensors on the model's device are used as they are); the fit keeps
-        index tensors (int32 split permutation and ``[E, N]`` bootstrap) and gathers and standardises each minibatch
-        from the caller's tensors, which it never modifies.
-        All randomness comes from torch's global RNG: ``th.manual_seed`` makes a fit reproducible.
-        ``fit`` makes the parameters trainable again (undoes :meth:`freeze`) and leaves the model in eval mode.
+        ``fit`` makes the parameters trainable again (undoes :meth:`EnsembleDynamics.freeze`) and leaves the
+        model in eval mode.
 
         :param observations: ``[N, obs_dim]``
         :param actions: ``[N, action_dim]``
@@ -352,192 +719,154 @@ class EnsembleDynamics(nn.Module):
         :param rewards: ``[N]``
         :param dones: ``[N]`` termination flags, true terminations only, not time-limit truncations
             (needed with ``learn_termination``, ignored otherwise)
-        :param batch_size: minibatch size per member
-        :param learning_rate: Adam learning rate
-        :param holdout_ratio: fraction of the data held out for early stopping
-        :param max_holdout: maximum holdout size
-        :param max_epochs: stop after this many epochs (``None``: early stopping only)
-        :param max_steps: stop after this many gradient steps in total (``None``: no limit)
-        :param patience: epochs without a >1% improvement of any member before stopping
-        :param progress_bar: show a tqdm bar over epochs
-        :param logger: SB3 logger; ``dynamics/*`` values are recorded and dumped after every epoch
-        :param verbose: 1: a summary line at the end, 2: a line per epoch
-        :param max_epoch_steps: cap on the gradient steps of one epoch (``None``: a full pass)
         :return: ``holdout_mse`` (raw next-state MSE of the deterministic elite-mean prediction on the
             holdout), ``no_change_mse`` (same for ``s' = s``), ``holdout_reward_mse``, ``holdout_norm_mse``
             (elites' mean normalised-target MSE), ``holdout_term_acc`` (with a termination head),
             ``train_loss``, ``epochs``, ``steps``, ``fit_time`` (seconds)
         """
         start = time.perf_counter()
-        if self.learn_termination and dones is None:
-            raise ValueError("learn_termination=True needs dones")
-        device = self.obs_mean.device
+        model = self.model
+        data = Transitions.from_arrays(model, observations, actions, next_observations, rewards, dones)
+        split = holdout_split(len(data), self.holdout_ratio, self.max_holdout, device=data.observations.device)
+        stats = split_statistics(data.observations, data.actions, data.next_observations, data.rewards, split.train)
+        model.set_normalization(stats)
+        x_hold, y_hold = data.standardized(split.holdout, stats)  # [H, in], [H, D]
+        d_hold = data.done_rows(split.holdout)
+        no_change_mse = float(((data.next_observations[split.holdout] - data.observations[split.holdout]) ** 2).mean())
+        batches = BootstrapBatches(split.train, model.n_members, self.batch_size)
 
-        def as_tensor(a: th.Tensor | np.ndarray) -> th.Tensor:
-            return th.as_tensor(a, dtype=th.float32, device=device)
-
-        obs = as_tensor(observations).reshape(-1, self.obs_dim)
-        n = obs.shape[0]
-        act = as_tensor(actions).reshape(n, self.action_dim)
-        next_obs = as_tensor(next_observations).reshape(n, self.obs_dim)
-        rew = as_tensor(rewards).reshape(n, 1)
-        done_all = as_tensor(dones).reshape(n) if (self.learn_termination and dones is not None) else None
-
-        # Holdout split; with no room for one, evaluate on (part of) the training data. Only indices are
-        # kept (int32 where they fit: same draws as int64): minibatches are gathered from the caller's tensors.
-        n_holdout = min(int(n * holdout_ratio), max_holdout)
-        if n - n_holdout < 1:
-            raise ValueError(f"not enough transitions to fit ({n})")
-        index_dtype = th.int32 if n <= th.iinfo(th.int32).max else th.long
-        perm = th.randperm(n, device=device, dtype=index_dtype)
-        hold_idx, train_idx = perm[:n_holdout].long(), perm[n_holdout:]  # train_idx: a view, no copy
-        if n_holdout == 0:
-            hold_idx = train_idx[:max_holdout].long()
-
-        in_mean, in_std, t_mean, t_std = _split_statistics(obs, act, next_obs, rew, train_idx)
-        with th.no_grad():
-            self.obs_mean.copy_(in_mean[: self.obs_dim])
-            self.obs_std.copy_(in_std[: self.obs_dim])
-            self.act_mean.copy_(in_mean[self.obs_dim :])
-            self.act_std.copy_(in_std[self.obs_dim :])
-            self.target_mean.copy_(t_mean)
-            self.target_std.copy_(t_std)
-
-        def gather(rows: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
-            """Standardised inputs ``[..., in]`` and targets ``[..., D]`` of the transitions ``rows``."""
-            obs_rows = obs[rows]
-            x = (th.cat((obs_rows, act[rows]), dim=-1) - in_mean) / in_std
-            y = (th.cat((next_obs[rows] - obs_rows, rew[rows]), dim=-1) - t_mean) / t_std
-            return x, y
-
-        x_hold, y_hold = gather(hold_idx)  # [H, in], [H, D]
-        d_hold = done_all[hold_idx] if done_all is not None else None
-        no_change_mse = float(((next_obs[hold_idx] - obs[hold_idx]) ** 2).mean())
-
-        n_train = train_idx.shape[0]
-        steps_per_pass = math.ceil(n_train / batch_size)
-        steps_per_epoch = steps_per_pass if max_epoch_steps is None else max(1, min(steps_per_pass, max_epoch_steps))
-        # Bootstrap resample per member, fixed for the fit: [E, N_train] indices into the training split
-        # (drawn in place in the index dtype: the same values as th.randint's int64).
-        bootstrap = th.empty((self.n_members, n_train), dtype=index_dtype, device=device).random_(0, n_train)
-        pass_perm = th.empty(0, dtype=index_dtype, device=device)
-        cursor = steps_per_pass  # forces a shuffle at the first step
-
-        self.requires_grad_(True)
-        self.train()
-        optimizer = th.optim.Adam(self.parameters(), lr=learning_rate)
-        member_params = [p for layer in self.linear_layers for p in (layer.weight, layer.bias)]
-        snapshots = [p.detach().clone() for p in member_params]
-        best = th.full((self.n_members,), float("inf"), device=device)
-
-        pbar = None
-        if progress_bar:
-            from tqdm.auto import tqdm
-
-            pbar = tqdm(total=max_epochs, desc="dynamics", unit="epoch")
-
-        epoch, step, epochs_since_improvement = 0, 0, 0
-        train_loss = float("nan")
-        while (max_epochs is None or epoch < max_epochs) and (max_steps is None or step < max_steps):
-            n_steps = steps_per_epoch if max_steps is None else min(steps_per_epoch, max_steps - step)
-            loss_sum = th.zeros((), device=device)
-            for _ in range(n_steps):
-                if cursor >= steps_per_pass:
-                    # New pass: one column permutation shuffles every member's (independent) resample.
-                    pass_perm = th.randperm(n_train, device=device, dtype=index_dtype)
-                    cursor = 0
-                cols = pass_perm[cursor * batch_size : (cursor + 1) * batch_size]  # [b]
-                rows = train_idx[bootstrap[:, cols].long()].long()  # [E, b] transitions
-                cursor += 1
-                x, y = gather(rows)  # [E, b, in], [E, b, D]
-                mean, logvar, logit = self._forward(x)  # [E, b, D]
-                loss = self._loss(mean, logvar, logit, y, done_all[rows] if done_all is not None else None)
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                optimizer.step()
-                loss_sum += loss.detach()
-            step += n_steps
-            epoch += 1
-            train_loss = float(loss_sum) / max(n_steps, 1)
-
-            # Early stopping on each member's holdout error; keep each member's best weights.
-            mse, score, raw_state_mse = self._holdout_scores(x_hold, y_hold, d_hold)  # [E]
-            improved = score < best * 0.99  # relative improvement > 1%
-            best = th.where(improved, score, best)
-            with th.no_grad():
-                for snap, p in zip(snapshots, member_params, strict=True):
-                    snap.copy_(th.where(improved.view(-1, 1, 1), p, snap))
-            epochs_since_improvement = 0 if bool(improved.any()) else epochs_since_improvement + 1
-
+        model.requires_grad_(True)
+        model.train()
+        stopping = EarlyStopping(model, self.patience)
+        self._open_progress()
+        epoch, step, train_loss = 0, 0, float("nan")
+        while self._within_budget(epoch, step):
+            n_steps = self._epoch_steps(batches.steps_per_pass, step)
+            train_loss = self.train_epoch(data, stats, batches, n_steps)
+            epoch, step = epoch + 1, step + n_steps
+            mse, score, raw_state_mse = holdout_scores(model, x_hold, y_hold, d_hold)  # [E]
+            stopping.update(score)
             record = {
                 "dynamics/train_loss": train_loss,
                 "dynamics/holdout_mse": float(raw_state_mse.mean()),  # members' mean, raw next state
                 "dynamics/no_change_mse": no_change_mse,
                 "dynamics/holdout_norm_mse": float(mse.mean()),
-                "dynamics/best_holdout_norm_mse": float(best.min()),
+                "dynamics/best_holdout_norm_mse": float(stopping.best.min()),
                 "dynamics/epoch": epoch,
                 "dynamics/steps": step,
             }
-            if logger is not None:
-                for key, value in record.items():
-                    logger.record(key, value)
-                logger.dump(step=step)
-            if verbose >= 2:
-                print(
-                    f"dynamics epoch {epoch} steps {step}: train loss {train_loss:.4f}, "
-                    f"holdout next-state mse {float(raw_state_mse.mean()):.5f} (no change {no_change_mse:.5f}), "
-                    f"normalised {float(mse.mean()):.5f} (best {float(best.min()):.5f}), "
-                    f"no improvement for {epochs_since_improvement}"
-                )
-            if pbar is not None:
-                pbar.update(1)
-                pbar.set_postfix(loss=f"{train_loss:.3f}", holdout=f"{float(mse.mean()):.4f}")
-            if epochs_since_improvement >= patience:
+            self._report_epoch(record, stopping.epochs_since_improvement)
+            if stopping.should_stop:
                 break
-        if pbar is not None:
-            pbar.close()
-        optimizer.zero_grad(set_to_none=True)  # leave no stale gradients on the parameters
+        self._close_progress()
+        self.optimizer.zero_grad(set_to_none=True)  # leave no stale gradients on the parameters
 
         # Best weights of every member, then the elites.
-        with th.no_grad():
-            for snap, p in zip(snapshots, member_params, strict=True):
-                p.copy_(snap)
-        mse, score, _ = self._holdout_scores(x_hold, y_hold, d_hold)
-        with th.no_grad():
-            self.elites.copy_(th.sort(th.argsort(score)[: self.n_elites]).values)
-        self.eval()
-
-        metrics = self._evaluate(obs[hold_idx], act[hold_idx], next_obs[hold_idx], rew[hold_idx, 0], d_hold)
+        stopping.restore_best()
+        mse, score, _ = holdout_scores(model, x_hold, y_hold, d_hold)
+        model.set_elites(select_elites(score, model.n_elites))
+        model.eval()
+        metrics = holdout_errors(model, data, split.holdout)
         metrics.update(
-            holdout_norm_mse=float(mse[self.elites].mean()),
+            holdout_norm_mse=float(mse[model.elites].mean()),
             train_loss=train_loss,
             epochs=float(epoch),
             steps=float(step),
             fit_time=time.perf_counter() - start,
         )
-        if logger is not None:
-            for key, value in metrics.items():
-                logger.record(f"dynamics/{key}", value)
-            logger.dump(step=step)
-        if verbose >= 1:
-            print(
-                f"dynamics fit: {epoch} epochs, {step} steps, {metrics['fit_time']:.1f} s; holdout next-state mse "
-                f"{metrics['holdout_mse']:.5f} vs no-change {metrics['no_change_mse']:.5f}, "
-                f"reward mse {metrics['holdout_reward_mse']:.5f}, elites {self.elites.tolist()}"
-            )
+        self._report_fit(metrics)
         return metrics
 
-    @th.no_grad()
-    def _evaluate(
-        self, obs: th.Tensor, act: th.Tensor, next_obs: th.Tensor, rew: th.Tensor, done: th.Tensor | None
-    ) -> dict[str, float]:
-        """Raw-space errors of the deterministic :meth:`step` on held-out transitions."""
-        pred_obs, pred_rew, pred_term, _ = self.step(obs, act, deterministic=True)
-        metrics = {
-            "holdout_mse": float(((pred_obs - next_obs) ** 2).mean()),
-            "no_change_mse": float(((obs - next_obs) ** 2).mean()),
-            "holdout_reward_mse": float(((pred_rew - rew) ** 2).mean()),
-        }
-        if done is not None:
-            metrics["holdout_term_acc"] = float(((pred_term > 0.5).float() == done).float().mean())
-        return metrics
+    def train_epoch(self, data: Transitions, stats: NormalizationStats, batches: BootstrapBatches, n_steps: int) -> float:
+        """``n_steps`` Adam steps of the ensemble's loss (:meth:`EnsembleDynamics._loss`), all members per step.
+
+        :param data: the transitions
+        :param stats: the normalisation statistics of the training split
+        :param batches: the members' bootstrap minibatches
+        :param n_steps: gradient steps
+        :return: the mean training loss of these steps (NaN-free: 0 for no step)
+        """
+        loss_sum = th.zeros((), device=data.observations.device)
+        for _ in range(n_steps):
+            rows = batches.next_rows()  # [E, b]
+            x, y = data.standardized(rows, stats)  # [E, b, in], [E, b, D]
+            mean, logvar, logit = self.model._forward(x)  # [E, b, D]
+            loss = self.model._loss(mean, logvar, logit, y, data.done_rows(rows))
+            self.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            self.optimizer.step()
+            loss_sum += loss.detach()
+        return float(loss_sum) / max(n_steps, 1)
+
+    def _within_budget(self, epoch: int, step: int) -> bool:
+        """Whether ``max_epochs`` and ``max_steps`` leave room for another epoch.
+
+        :param epoch: epochs done
+        :param step: gradient steps done
+        :return: room for another epoch
+        """
+        return (self.max_epochs is None or epoch < self.max_epochs) and (self.max_steps is None or step < self.max_steps)
+
+    def _epoch_steps(self, steps_per_pass: int, step: int) -> int:
+        """Gradient steps of the next epoch: a pass, capped at ``max_epoch_steps`` and by what ``max_steps`` leaves.
+
+        :param steps_per_pass: steps of one pass over the resample
+        :param step: gradient steps done
+        :return: steps of the next epoch
+        """
+        n_steps = steps_per_pass if self.max_epoch_steps is None else max(1, min(steps_per_pass, self.max_epoch_steps))
+        return n_steps if self.max_steps is None else min(n_steps, self.max_steps - step)
+
+    def _open_progress(self) -> None:
+        """Open the tqdm bar over epochs, with ``progress_bar``."""
+        if self.progress_bar:
+            from tqdm.auto import tqdm
+
+            self._pbar = tqdm(total=self.max_epochs, desc="dynamics", unit="epoch")
+
+    def _close_progress(self) -> None:
+        """Close the tqdm bar, if any."""
+        if self._pbar is not None:
+            self._pbar.close()
+            self._pbar = None
+
+    def _report_epoch(self, record: dict[str, float], epochs_since_improvement: int) -> None:
+        """Log, print and show one epoch's values.
+
+        :param record: the ``dynamics/*`` values of the epoch
+        :param epochs_since_improvement: epochs without an improvement of any member
+        """
+        if self.logger is not None:
+            for key, value in record.items():
+                self.logger.record(key, value)
+            self.logger.dump(step=int(record["dynamics/steps"]))
+        if self.verbose >= 2:
+            r = {key.removeprefix("dynamics/"): value for key, value in record.items()}
+            print(
+                f"dynamics epoch {r['epoch']} steps {r['steps']}: train loss {r['train_loss']:.4f}, "
+                f"holdout next-state mse {r['holdout_mse']:.5f} (no change {r['no_change_mse']:.5f}), "
+                f"normalised {r['holdout_norm_mse']:.5f} (best {r['best_holdout_norm_mse']:.5f}), "
+                f"no improvement for {epochs_since_improvement}"
+            )
+        if self._pbar is not None:
+            self._pbar.update(1)
+            self._pbar.set_postfix(
+                loss=f"{record['dynamics/train_loss']:.3f}", holdout=f"{record['dynamics/holdout_norm_mse']:.4f}"
+            )
+
+    def _report_fit(self, metrics: dict[str, float]) -> None:
+        """Log and print the fit's final metrics.
+
+        :param metrics: what :meth:`fit` returns
+        """
+        step = int(metrics["steps"])
+        if self.logger is not None:
+            for key, value in metrics.items():
+                self.logger.record(f"dynamics/{key}", value)
+            self.logger.dump(step=step)
+        if self.verbose >= 1:
+            print(
+                f"dynamics fit: {int(metrics['epochs'])} epochs, {step} steps, {metrics['fit_time']:.1f} s; holdout "
+                f"next-state mse {metrics['holdout_mse']:.5f} vs no-change {metrics['no_change_mse']:.5f}, "
+                f"reward mse {metrics['holdout_reward_mse']:.5f}, elites {self.model.elites.tolist()}"
+            )

@@ -21,13 +21,28 @@ import json
 import os
 import pathlib
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+if TYPE_CHECKING:
+    import gymnasium as gym
+    from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 
-def chained_starts(data: Any, horizon: int, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Indices ``i`` whose next ``horizon`` transitions follow one another in one episode."""
+    from sb3_pola.common.datasets import OfflineDataset
+    from sb3_pola.common.dynamics import EnsembleDynamics
+    from sb3_pola.pola import POLA
+
+
+def chained_starts(data: OfflineDataset, horizon: int, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices ``i`` whose next ``horizon`` transitions follow one another in one episode.
+
+    :param data: the dataset
+    :param horizon: chain length ``T``
+    :param n: number of starts wanted
+    :param rng: draws the starts
+    :return: up to ``n`` distinct start indices
+    """
     obs, next_obs = data.observations, data.next_observations
     follows = np.all(next_obs[:-1] == obs[1:], axis=1) & (data.dones[:-1] == 0)  # i -> i + 1 is the same episode
     ok = np.ones(len(obs) - horizon, dtype=bool)
@@ -37,8 +52,17 @@ def chained_starts(data: Any, horizon: int, n: int, rng: np.random.Generator) ->
     return rng.choice(candidates, size=min(n, len(candidates)), replace=False)
 
 
-def open_loop_errors(dynamics: Any, data: Any, starts: np.ndarray, horizon: int) -> dict[str, list[float]]:
-    """``k``-step MSE of the model along the dataset's trajectories (its own actions), and of "no change"."""
+def open_loop_errors(
+    dynamics: EnsembleDynamics, data: OfflineDataset, starts: np.ndarray, horizon: int
+) -> dict[str, list[float]]:
+    """``k``-step MSE of the model along the dataset's trajectories (its own actions), and of "no change".
+
+    :param dynamics: the fitted model
+    :param data: the dataset
+    :param starts: start indices (:func:`chained_starts`)
+    :param horizon: steps ``T``
+    :return: ``mse``, ``no_change_mse`` and the elites' ``disagreement``, one value per ``k = 1..T``
+    """
     import torch as th
 
     obs = th.as_tensor(data.observations[starts])
@@ -56,12 +80,21 @@ def open_loop_errors(dynamics: Any, data: Any, starts: np.ndarray, horizon: int)
 
 
 def policy_rollout_errors(
-    dynamics: Any, policy_model: Any, env: Any, data: Any, starts: np.ndarray, horizon: int
+    dynamics: EnsembleDynamics, policy_model: POLA, env: gym.Env, data: OfflineDataset, starts: np.ndarray, horizon: int
 ) -> dict[str, list[float]]:
-    """``k``-step MSE of the model against the simulator under the policy's own (deterministic) actions."""
+    """``k``-step MSE of the model against the simulator under the policy's own (deterministic) actions.
+
+    :param dynamics: the fitted model
+    :param policy_model: the policy whose actions drive both rollouts
+    :param env: the dataset's MuJoCo env
+    :param data: the dataset
+    :param starts: start indices (:func:`chained_starts`)
+    :param horizon: steps ``T``
+    :return: ``mse``, ``no_change_mse``, ``disagreement`` per ``k`` and ``error_disagreement_corr`` at ``k = T``
+    """
     import torch as th
 
-    sim = env.unwrapped
+    sim = cast("MujocoEnv", env.unwrapped)
     nq, nv = sim.model.nq, sim.model.nv
     obs_dim = data.observations.shape[1]
     if obs_dim not in (nq + nv, nq - 1 + nv):
@@ -100,7 +133,11 @@ def policy_rollout_errors(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``sb3-pola model-check``; returns the exit code."""
+    """``sb3-pola model-check``.
+
+    :param argv: command-line arguments (default ``sys.argv[1:]``)
+    :return: the exit code
+    """
     parser = argparse.ArgumentParser(prog="sb3-pola model-check", description=__doc__.split("\n\n")[0])
     parser.add_argument("--dataset", required=True)
     parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
