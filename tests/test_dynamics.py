@@ -11,11 +11,11 @@ import pytest
 import torch as th
 import torch.nn.functional as F
 
-from sb3_pola.common.dynamics import (
+from sb3_pola.common.dynamics import EnsembleDynamics
+from sb3_pola.common.dynamics_trainer import (
     BootstrapBatches,
     DynamicsTrainer,
     EarlyStopping,
-    EnsembleDynamics,
     Transitions,
     holdout_scores,
     holdout_split,
@@ -25,6 +25,11 @@ from sb3_pola.common.dynamics import (
 from sb3_pola.common.torch_layers import VectorizedLinear
 
 OBS_DIM, ACT_DIM = 5, 2
+
+
+def fit(model: EnsembleDynamics, *data, **options) -> dict[str, float]:
+    """One fit of ``model`` by a fresh trainer with ``options``."""
+    return DynamicsTrainer(model, **options).fit(*data)
 
 
 @pytest.fixture(autouse=True)
@@ -106,7 +111,7 @@ def test_fit_beats_no_change_baseline(nonlinear: bool) -> None:
     data = _synthetic(2000, nonlinear)
     th.manual_seed(0)
     model = _small()
-    metrics = model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=40, learning_rate=1e-2)
+    metrics = fit(model, data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=40, learning_rate=1e-2)
     assert metrics["holdout_mse"] < 0.2 * metrics["no_change_mse"], metrics
     assert metrics["holdout_reward_mse"] < 0.2 * float(data["rew"].var()), metrics
     assert metrics["epochs"] <= 40 and metrics["steps"] > 0 and metrics["fit_time"] > 0
@@ -121,7 +126,7 @@ def test_fit_accepts_numpy_and_respects_max_steps() -> None:
     th.manual_seed(0)
     model = _small()
     np_data = {k: v.numpy().astype(np.float64) for k, v in data.items()}
-    metrics = model.fit(np_data["obs"], np_data["act"], np_data["next_obs"], np_data["rew"], max_steps=7, batch_size=64)
+    metrics = fit(model, np_data["obs"], np_data["act"], np_data["next_obs"], np_data["rew"], max_steps=7, batch_size=64)
     assert metrics["steps"] == 7
 
 
@@ -131,7 +136,7 @@ def test_fit_is_reproducible_with_seed() -> None:
     for _ in range(2):
         th.manual_seed(123)
         model = _small()
-        model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=3, batch_size=128)
+        fit(model, data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=3, batch_size=128)
         states.append(model.state_dict())
     for key in states[0]:
         th.testing.assert_close(states[0][key], states[1][key], rtol=0, atol=0)
@@ -170,7 +175,7 @@ def test_fit_leaves_caller_tensors_untouched() -> None:
     before = {k: v.clone() for k, v in data.items()}
     th.manual_seed(0)
     model = _small(learn_termination=True)
-    model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=2, batch_size=64)
+    fit(model, data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=2, batch_size=64)
     for key, value in data.items():
         assert th.equal(value, before[key]), key
     # the statistics are those of the training split: close to those of the whole data set
@@ -183,14 +188,15 @@ def test_early_stopping_and_epoch_cap() -> None:
     th.manual_seed(0)
     model = _small()
     # 1200 training samples / 64: 19 steps per pass, capped at 5 per epoch
-    metrics = model.fit(
-        data["obs"], data["act"], data["next_obs"], data["rew"], batch_size=64, max_epochs=3, max_epoch_steps=5
+    metrics = fit(
+        model, data["obs"], data["act"], data["next_obs"], data["rew"], batch_size=64, max_epochs=3, max_epoch_steps=5
     )
     assert metrics["steps"] == 15 and metrics["epochs"] == 3
     # patience=1 stops at the first epoch without a >1% improvement of any member
     th.manual_seed(0)
     model = _small()
-    metrics = model.fit(
+    metrics = fit(
+        model,
         data["obs"],
         data["act"],
         data["next_obs"],
@@ -207,7 +213,7 @@ def test_step_differentiable_after_freeze() -> None:
     th.manual_seed(0)
     model = _small(learn_termination=True)
     data = _synthetic(500, nonlinear=True)
-    model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=2)
+    fit(model, data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=2)
     model.freeze()
     assert not model.training
     obs = th.randn(16, OBS_DIM, requires_grad=True)
@@ -226,7 +232,7 @@ def test_deterministic_step_is_repeatable_and_stochastic_is_not() -> None:
     th.manual_seed(0)
     model = _small()
     data = _synthetic(500, nonlinear=True)
-    model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=2)
+    fit(model, data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=2)
     obs, act = th.randn(32, OBS_DIM), th.randn(32, ACT_DIM)
     with th.no_grad():
         a = model.step(obs, act, deterministic=True)
@@ -265,7 +271,7 @@ def test_state_dict_round_trip_weights_only() -> None:
     data = _synthetic(1000, nonlinear=True)
     data = {k: v * 3 + 1 if k != "done" else v for k, v in data.items()}  # non-trivial normalisation
     model = EnsembleDynamics(OBS_DIM, ACT_DIM, n_members=5, n_elites=2, hidden_dim=32, n_layers=2, learn_termination=True)
-    model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=3)
+    fit(model, data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=3)
     with th.no_grad():
         model.elites.copy_(th.tensor([1, 4]))  # not the default arange
     buffer = io.BytesIO()
@@ -288,8 +294,8 @@ def test_termination_head_learns_rule() -> None:
     assert 0.1 < float(data["done"].mean()) < 0.9
     th.manual_seed(0)
     model = _small(learn_termination=True)
-    metrics = model.fit(
-        data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=10, learning_rate=1e-2
+    metrics = fit(
+        model, data["obs"], data["act"], data["next_obs"], data["rew"], data["done"], max_epochs=10, learning_rate=1e-2
     )
     assert metrics["holdout_term_acc"] > 0.93, metrics
     # fresh points: predicted probability agrees with the rule
@@ -304,7 +310,7 @@ def test_learn_termination_needs_dones() -> None:
     model = _small(learn_termination=True)
     data = _synthetic(100, nonlinear=False)
     with pytest.raises(ValueError, match="dones"):
-        model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=1)
+        fit(model, data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=1)
 
 
 def test_weight_decays_validation() -> None:
@@ -331,7 +337,7 @@ def test_logger_records_dynamics_values() -> None:
     logger = Capture()
     th.manual_seed(0)
     data = _synthetic(500, nonlinear=False)
-    _small().fit(data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=2, logger=logger)
+    fit(_small(), data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=2, logger=logger)
     assert len(logger.dumps) == 3  # two epochs + the final summary
     assert "dynamics/holdout_mse" in logger.dumps[0] and "dynamics/no_change_mse" in logger.dumps[0]
     assert "dynamics/fit_time" in logger.dumps[-1]

@@ -11,6 +11,7 @@ from pola_data import light_kwargs, record_random_dataset
 
 from sb3_pola import POLA
 from sb3_pola.common.dynamics import EnsembleDynamics
+from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 from sb3_pola.common.schedules import WarmupSchedule, warmup_schedule
 from sb3_pola.pola.pola import lookahead_q_objective
 
@@ -174,7 +175,7 @@ def test_dynamics_fit_with_each_mean_loss_beats_no_change(mean_loss):
     obs, act = th.randn(1500, 3), th.randn(1500, 2)
     next_obs = obs + 0.3 * th.tanh(act @ th.randn(2, 3)) + 0.01 * th.randn(1500, 3)
     model = EnsembleDynamics(3, 2, n_members=3, n_elites=2, hidden_dim=32, n_layers=2, mean_loss=mean_loss)
-    info = model.fit(obs, act, next_obs, th.zeros(1500), max_epochs=30)
+    info = DynamicsTrainer(model, max_epochs=30).fit(obs, act, next_obs, th.zeros(1500))
     assert info["holdout_mse"] < 0.1 * info["no_change_mse"]
 
 

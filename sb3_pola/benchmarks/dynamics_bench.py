@@ -18,6 +18,7 @@ from typing import Any
 import torch as th
 
 from sb3_pola.common.dynamics import EnsembleDynamics
+from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 
 OBS_DIM, ACT_DIM = 17, 6
 
@@ -52,7 +53,7 @@ def bench_fit(n: int, max_epochs: int, seed: int = 0) -> dict[str, float]:
     data = synthetic_transitions(n, seed)
     th.manual_seed(seed)
     model = EnsembleDynamics(OBS_DIM, ACT_DIM)
-    metrics = model.fit(data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=max_epochs)
+    metrics = DynamicsTrainer(model, max_epochs=max_epochs).fit(data["obs"], data["act"], data["next_obs"], data["rew"])
     metrics["ms_per_step"] = 1000 * metrics["fit_time"] / max(metrics["steps"], 1)
     metrics["n"] = float(n)
     return metrics

@@ -156,6 +156,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from sb3_pola.common.datasets import load_offline_dataset, make_env
     from sb3_pola.common.dynamics import EnsembleDynamics
+    from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 
     data = load_offline_dataset(args.dataset)
     rng = np.random.default_rng(args.seed)
@@ -172,7 +173,9 @@ def main(argv: list[str] | None = None) -> int:
         kwargs = {**json.loads(args.dynamics_kwargs), "mean_loss": mean_loss}
         model = EnsembleDynamics(data.observations.shape[1], data.actions.shape[1], **kwargs)
         start = time.perf_counter()
-        info = model.fit(data.observations, data.actions, data.next_observations, data.rewards, max_steps=args.max_steps)
+        info = DynamicsTrainer(model, max_steps=args.max_steps).fit(
+            data.observations, data.actions, data.next_observations, data.rewards
+        )
         model.freeze()
         entry: dict[str, Any] = {"fit": info, "fit_s": time.perf_counter() - start}
         entry["dataset_actions"] = open_loop_errors(model, data, starts, args.horizon)

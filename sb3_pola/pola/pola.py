@@ -16,6 +16,7 @@ from stable_baselines3.common.utils import FloatSchedule
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
+from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.common.termination import TerminationFn, get_termination_fn
 from sb3_pola.pola.export import export_policy
@@ -165,7 +166,7 @@ class POLA(OfflineAlgorithm):
     :param ema_update_freq: gradient steps between EMA updates
     :param ema_start: gradient step from which the EMA averages (before it copies the actor)
     :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`
-    :param dynamics_fit_kwargs: arguments of :meth:`~sb3_pola.common.dynamics.EnsembleDynamics.fit`
+    :param dynamics_fit_kwargs: arguments of :class:`~sb3_pola.common.dynamics_trainer.DynamicsTrainer`
     :param compile_update: compile the critic and actor losses (forward and backward) with ``torch.compile``
         for the static shapes of training, and on CUDA capture them as CUDA graphs (the GPU speed path).
         The first gradient step compiles (one to three minutes on a small CPU); random draws match eager
@@ -347,8 +348,8 @@ class POLA(OfflineAlgorithm):
             return
         buffer = self._setup_offline_data()
         fit_kwargs = {"progress_bar": progress_bar, "logger": self.logger, "verbose": self.verbose, **self.dynamics_fit_kwargs}
-        self.dynamics_fit_info = dynamics.fit(
-            buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones, **fit_kwargs
+        self.dynamics_fit_info = DynamicsTrainer(dynamics, **fit_kwargs).fit(
+            buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones
         )
         dynamics.freeze()
         self.policy.dynamics_fitted.fill_(True)

@@ -1,0 +1,558 @@
+"""The trainer of :class:`~sb3_pola.common.dynamics.EnsembleDynamics` (MOPO / OfflineRL-Kit recipe, our own code).
+
+:class:`DynamicsTrainer` owns the optimiser and the fit: holdout split (:func:`holdout_split`), normalisation
+statistics of the training split (:func:`split_statistics`), bootstrap resamples (:class:`BootstrapBatches`),
+epochs, per-member holdout scores (:func:`holdout_scores`), early stopping (:class:`EarlyStopping`) and elite
+selection (:func:`select_elites`). The model module knows nothing of it::
+
+    dynamics = EnsembleDynamics(obs_dim, action_dim)
+    info = DynamicsTrainer(dynamics, max_epochs=50).fit(obs, actions, next_obs, rewards, dones)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch as th
+import torch.nn.functional as F
+
+from sb3_pola.common.dynamics import EnsembleDynamics, NormalizationStats
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.logger import Logger
+    from tqdm import tqdm
+
+
+@dataclass(frozen=True)
+class Transitions:
+    """The transitions of a fit as float32 tensors on the model's device.
+
+    :meth:`from_arrays` converts without copying what is one already; nothing here modifies the tensors.
+
+    :param observations: ``[N, obs_dim]``
+    :param actions: ``[N, action_dim]``
+    :param next_observations: ``[N, obs_dim]``
+    :param rewards: ``[N, 1]``
+    :param dones: ``[N]`` termination flags, or None (no termination head)
+    """
+
+    observations: th.Tensor
+    actions: th.Tensor
+    next_observations: th.Tensor
+    rewards: th.Tensor
+    dones: th.Tensor | None
+
+    @classmethod
+    def from_arrays(
+        cls,
+        model: EnsembleDynamics,
+        observations: th.Tensor | np.ndarray,
+        actions: th.Tensor | np.ndarray,
+        next_observations: th.Tensor | np.ndarray,
+        rewards: th.Tensor | np.ndarray,
+        dones: th.Tensor | np.ndarray | None = None,
+    ) -> Transitions:
+        """The caller's arrays in the model's shapes, dtype and device; ``dones`` kept only for a termination head.
+
+        :param model: the model to fit
+        :param observations: ``[N, obs_dim]``
+        :param actions: ``[N, action_dim]``
+        :param next_observations: ``[N, obs_dim]``
+        :param rewards: ``[N]`` or ``[N, 1]``
+        :param dones: ``[N]`` or ``[N, 1]``; required with ``learn_termination``
+        :return: the transitions
+        """
+        if model.learn_termination and dones is None:
+            raise ValueError("learn_termination=True needs dones")
+        device = model.obs_mean.device
+
+        def as_tensor(a: th.Tensor | np.ndarray) -> th.Tensor:
+            return th.as_tensor(a, dtype=th.float32, device=device)
+
+        obs = as_tensor(observations).reshape(-1, model.obs_dim)
+        n = obs.shape[0]
+        act = as_tensor(actions).reshape(n, model.action_dim)
+        next_obs = as_tensor(next_observations).reshape(n, model.obs_dim)
+        rew = as_tensor(rewards).reshape(n, 1)
+        done = as_tensor(dones).reshape(n) if (model.learn_termination and dones is not None) else None
+        return cls(obs, act, next_obs, rew, done)
+
+    def __len__(self) -> int:
+        return self.observations.shape[0]
+
+    def standardized(self, rows: th.Tensor, stats: NormalizationStats) -> tuple[th.Tensor, th.Tensor]:
+        """Standardised inputs and targets of the transitions ``rows``, gathered from the tensors (which stay as they are).
+
+        :param rows: transition indices, any shape ``[...]``
+        :param stats: the normalisation statistics
+        :return: inputs ``[..., obs_dim + action_dim]`` and targets ``[..., obs_dim + 1]``
+        """
+        obs_rows = self.observations[rows]
+        x = (th.cat((obs_rows, self.actions[rows]), dim=-1) - stats.input_mean) / stats.input_std
+        y = (
+            th.cat((self.next_observations[rows] - obs_rows, self.rewards[rows]), dim=-1) - stats.target_mean
+        ) / stats.target_std
+        return x, y
+
+    def done_rows(self, rows: th.Tensor) -> th.Tensor | None:
+        """Termination flags of the transitions ``rows`` (None without a termination head).
+
+        :param rows: transition indices
+        :return: flags of the shape of ``rows``, or None
+        """
+        return self.dones[rows] if self.dones is not None else None
+
+
+@dataclass(frozen=True)
+class HoldoutSplit:
+    """Indices of the training and holdout transitions (only indices: the data are never copied).
+
+    :param train: training rows ``[N_train]``, int32 where the row count fits (same draws as int64), a view of
+        the permutation
+    :param holdout: holdout rows ``[H]`` (int64)
+    """
+
+    train: th.Tensor
+    holdout: th.Tensor
+
+
+def holdout_split(n: int, holdout_ratio: float, max_holdout: int, device: th.device | str = "cpu") -> HoldoutSplit:
+    """Hold out a random ``min(holdout_ratio * n, max_holdout)`` of ``n`` transitions (one ``randperm`` draw).
+
+    With no room for a holdout, the first ``max_holdout`` training rows stand in for it, so that the scores
+    are measured on (part of) the training data.
+
+    :param n: number of transitions
+    :param holdout_ratio: fraction held out
+    :param max_holdout: maximum holdout size
+    :param device: device of the indices
+    :return: the split
+    """
+    n_holdout = min(int(n * holdout_ratio), max_holdout)
+    if n - n_holdout < 1:
+        raise ValueError(f"not enough transitions to fit ({n})")
+    index_dtype = th.int32 if n <= th.iinfo(th.int32).max else th.long
+    perm = th.randperm(n, device=device, dtype=index_dtype)
+    holdout, train = perm[:n_holdout].long(), perm[n_holdout:]
+    if n_holdout == 0:
+        holdout = train[:max_holdout].long()
+    return HoldoutSplit(train=train, holdout=holdout)
+
+
+def split_statistics(
+    obs: th.Tensor, act: th.Tensor, next_obs: th.Tensor, rew: th.Tensor, rows: th.Tensor, chunk_size: int = 4096
+) -> NormalizationStats:
+    """Column mean and std of the inputs ``[s, a]`` and the targets ``[s' - s, r]`` over the transitions ``rows``.
+
+    The std is the unbiased one, with 1 for (near-)constant columns and for a single row. The split is gathered
+    chunk by chunk (never copied whole); the chunks' float32 moments are merged in float64 with Chan et al.'s
+    pairwise update, so the result equals the float32 statistics of the materialised split up to rounding.
+
+    :param obs: ``[N, obs_dim]``
+    :param act: ``[N, action_dim]``
+    :param next_obs: ``[N, obs_dim]``
+    :param rew: ``[N, 1]``
+    :param rows: indices of the split ``[M]``
+    :param chunk_size: rows gathered at a time (small: large temporaries of a loop leave glibc's heap grown)
+    :return: input mean and std ``[obs_dim + action_dim]``, target mean and std ``[obs_dim + 1]`` (float32)
+    """
+    n_in = obs.shape[1] + act.shape[1]
+    count = 0
+    mean = th.zeros(n_in + obs.shape[1] + 1, dtype=th.float64, device=obs.device)
+    m2 = th.zeros_like(mean)  # sum of squared deviations from the mean
+    for start in range(0, rows.shape[0], chunk_size):
+        idx = rows[start : start + chunk_size]
+        obs_rows = obs.index_select(0, idx)
+        chunk = th.cat(
+            (obs_rows, act.index_select(0, idx), next_obs.index_select(0, idx) - obs_rows, rew.index_select(0, idx)), dim=-1
+        )  # [c, in + D]
+        c = chunk.shape[0]
+        c_var, c_mean_32 = th.var_mean(chunk, dim=0, correction=0)
+        c_mean, c_m2 = c_mean_32.double(), c_var.double() * c
+        delta = c_mean - mean
+        total = count + c
+        mean = mean + delta * (c / total)
+        m2 = m2 + c_m2 + delta**2 * (count * c / total)
+        count = total
+    if count > 1:
+        std = (m2 / (count - 1)).sqrt().float()
+        std = th.where(std < 1e-6, th.ones_like(std), std)
+    else:
+        std = th.ones_like(mean, dtype=th.float32)
+    mean = mean.float()
+    return NormalizationStats(mean[:n_in], std[:n_in], mean[n_in:], std[n_in:])
+
+
+class BootstrapBatches:
+    """Minibatches of every member's own bootstrap resample of the training split, all members at once.
+
+    The resample (``[E, N_train]`` positions in the training split, drawn in place in the index dtype: the
+    same values as ``th.randint``'s int64) is fixed for the whole fit. A *pass* walks through one random
+    permutation of the resamples' columns in ``batch_size`` steps: the members' resamples are independent,
+    so one permutation shuffles them all. The first permutation is drawn at the first batch.
+
+    :param train_rows: indices of the training split ``[N_train]``
+    :param n_members: ensemble size ``E``
+    :param batch_size: minibatch size per member
+    """
+
+    def __init__(self, train_rows: th.Tensor, n_members: int, batch_size: int) -> None:
+        self.train_rows = train_rows
+        self.batch_size = batch_size
+        self.n_train = train_rows.shape[0]
+        self.steps_per_pass = math.ceil(self.n_train / batch_size)
+        dtype, device = train_rows.dtype, train_rows.device
+        self.bootstrap = th.empty((n_members, self.n_train), dtype=dtype, device=device).random_(0, self.n_train)
+        self._pass_perm = th.empty(0, dtype=dtype, device=device)
+        self._cursor = self.steps_per_pass  # forces a shuffle at the first batch
+
+    def next_rows(self) -> th.Tensor:
+        """The transitions of the next minibatch, a new pass when the last one is through.
+
+        :return: transition indices ``[E, b]`` (``b = batch_size``, less at the end of a pass)
+        """
+        if self._cursor >= self.steps_per_pass:
+            self._pass_perm = th.randperm(self.n_train, device=self.train_rows.device, dtype=self.train_rows.dtype)
+            self._cursor = 0
+        cols = self._pass_perm[self._cursor * self.batch_size : (self._cursor + 1) * self.batch_size]  # [b]
+        self._cursor += 1
+        return self.train_rows[self.bootstrap[:, cols].long()].long()  # [E, b]
+
+
+@th.no_grad()
+def holdout_scores(
+    model: EnsembleDynamics, x: th.Tensor, y: th.Tensor, done: th.Tensor | None
+) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+    """Per-member holdout errors of every member's Gaussian mean.
+
+    :param model: the ensemble
+    :param x: standardised holdout inputs ``[H, in]``
+    :param y: standardised holdout targets ``[H, D]``
+    :param done: holdout termination flags ``[H]`` or None
+    :return: normalised-target MSE ``[E]``, the early-stopping score ``[E]`` (the MSE, + the BCE with a
+        termination head) and the next-state MSE in raw units ``[E]``
+    """
+    mean, _, logit = model._forward(x.unsqueeze(0).expand(model.n_members, -1, -1))  # [E, H, D]
+    err = mean - y  # [E, H, D]
+    mse = (err**2).mean(dim=(1, 2))  # [E]
+    raw_state_mse = ((err * model.target_std)[..., : model.obs_dim] ** 2).mean(dim=(1, 2))  # [E]
+    score = mse
+    if logit is not None and done is not None:
+        score = mse + F.binary_cross_entropy_with_logits(logit, done.expand_as(logit), reduction="none").mean(dim=1)
+    return mse, score, raw_state_mse
+
+
+class EarlyStopping:
+    """Holdout early stopping per member, keeping each member's best weights.
+
+    After every epoch, a member whose holdout score improved by more than 1% on its best keeps a snapshot
+    of its weights (the linear layers; the shared log-variance bounds are not per member). Training stops
+    after ``patience`` epochs without such an improvement of any member.
+
+    :param model: the ensemble being fitted (snapshots are taken at construction)
+    :param patience: epochs without an improvement before :attr:`should_stop`
+    """
+
+    def __init__(self, model: EnsembleDynamics, patience: int) -> None:
+        self.patience = patience
+        self.member_params = [p for layer in model.linear_layers for p in (layer.weight, layer.bias)]
+        self.snapshots = [p.detach().clone() for p in self.member_params]
+        self.best = th.full((model.n_members,), float("inf"), device=model.obs_mean.device)
+        self.epochs_since_improvement = 0
+
+    @th.no_grad()
+    def update(self, score: th.Tensor) -> th.Tensor:
+        """Record an epoch's scores; snapshot the members that improved.
+
+        :param score: holdout score per member ``[E]`` (lower is better)
+        :return: which members improved ``[E]`` (bool)
+        """
+        improved = score < self.best * 0.99  # relative improvement > 1%
+        self.best = th.where(improved, score, self.best)
+        for snap, p in zip(self.snapshots, self.member_params, strict=True):
+            snap.copy_(th.where(improved.view(-1, 1, 1), p, snap))
+        self.epochs_since_improvement = 0 if bool(improved.any()) else self.epochs_since_improvement + 1
+        return improved
+
+    @property
+    def should_stop(self) -> bool:
+        """``patience`` epochs in a row without an improvement of any member."""
+        return self.epochs_since_improvement >= self.patience
+
+    @th.no_grad()
+    def restore_best(self) -> None:
+        """Give every member back the weights of its best epoch."""
+        for snap, p in zip(self.snapshots, self.member_params, strict=True):
+            p.copy_(snap)
+
+
+def select_elites(score: th.Tensor, n_elites: int) -> th.Tensor:
+    """The ``n_elites`` members of lowest holdout score, in increasing index order.
+
+    :param score: holdout score per member ``[E]``
+    :param n_elites: number of elites
+    :return: member indices ``[n_elites]`` (int64)
+    """
+    return th.sort(th.argsort(score)[:n_elites]).values
+
+
+@th.no_grad()
+def holdout_errors(model: EnsembleDynamics, data: Transitions, rows: th.Tensor) -> dict[str, float]:
+    """Raw-space errors of the deterministic :meth:`EnsembleDynamics.step` (the elites' mean) on the transitions ``rows``.
+
+    :param model: the fitted ensemble
+    :param data: the transitions
+    :param rows: the holdout rows
+    :return: ``holdout_mse`` (next state), ``no_change_mse`` (the same for ``s' = s``), ``holdout_reward_mse``,
+        and ``holdout_term_acc`` with a termination head
+    """
+    obs, next_obs = data.observations[rows], data.next_observations[rows]
+    pred_obs, pred_rew, pred_term, _ = model.step(obs, data.actions[rows], deterministic=True)
+    metrics = {
+        "holdout_mse": float(((pred_obs - next_obs) ** 2).mean()),
+        "no_change_mse": float(((obs - next_obs) ** 2).mean()),
+        "holdout_reward_mse": float(((pred_rew - data.rewards[rows, 0]) ** 2).mean()),
+    }
+    done = data.done_rows(rows)
+    if done is not None:
+        metrics["holdout_term_acc"] = float(((pred_term > 0.5).float() == done).float().mean())
+    return metrics
+
+
+class DynamicsTrainer:
+    """Fits an :class:`EnsembleDynamics` on transitions with holdout early stopping, then picks the elites.
+
+    A random ``min(holdout_ratio * N, max_holdout)`` transitions are held out (:func:`holdout_split`);
+    normalisation statistics come from the rest (:func:`split_statistics`). Every member trains on its own
+    bootstrap resample of the training split (:class:`BootstrapBatches`), all members in one batched forward
+    per Adam step. An *epoch* is one pass over the resample, capped at ``max_epoch_steps`` gradient steps (so
+    that 1M transitions give epochs of 1000 steps, not 3,900); after every epoch each member's holdout score
+    is measured (:func:`holdout_scores`) and :class:`EarlyStopping` keeps the best weights of every member and
+    stops after ``patience`` epochs without an improvement of any member (or at ``max_epochs`` / ``max_steps``).
+    Each member ends with its best weights; the ``n_elites`` best holdout members become the elites
+    (:func:`select_elites`).
+
+    Memory: the data are not copied (float32 tensors on the model's device are used as they are); the fit keeps
+    index tensors (int32 split permutation and ``[E, N]`` bootstrap) and gathers and standardises each minibatch
+    from the caller's tensors, which it never modifies. All randomness comes from torch's global RNG:
+    ``th.manual_seed`` makes a fit reproducible. The Adam state lives in the trainer: a second :meth:`fit` of
+    the same trainer continues from it.
+
+    :param model: the ensemble to fit
+    :param batch_size: minibatch size per member
+    :param learning_rate: Adam learning rate
+    :param holdout_ratio: fraction of the data held out for early stopping
+    :param max_holdout: maximum holdout size
+    :param max_epochs: stop after this many epochs (``None``: early stopping only)
+    :param max_steps: stop after this many gradient steps in total (``None``: no limit)
+    :param patience: epochs without a >1% improvement of any member before stopping
+    :param max_epoch_steps: cap on the gradient steps of one epoch (``None``: a full pass)
+    :param progress_bar: show a tqdm bar over epochs
+    :param logger: SB3 logger; ``dynamics/*`` values are recorded and dumped after every epoch
+    :param verbose: 1: a summary line at the end, 2: a line per epoch
+    """
+
+    def __init__(
+        self,
+        model: EnsembleDynamics,
+        *,
+        batch_size: int = 256,
+        learning_rate: float = 1e-3,
+        holdout_ratio: float = 0.2,
+        max_holdout: int = 1000,
+        max_epochs: int | None = None,
+        max_steps: int | None = None,
+        patience: int = 5,
+        max_epoch_steps: int | None = 1000,
+        progress_bar: bool = False,
+        logger: Logger | None = None,
+        verbose: int = 0,
+    ) -> None:
+        self.model = model
+        self.batch_size = batch_size
+        self.holdout_ratio = holdout_ratio
+        self.max_holdout = max_holdout
+        self.max_epochs = max_epochs
+        self.max_steps = max_steps
+        self.patience = patience
+        self.max_epoch_steps = max_epoch_steps
+        self.progress_bar = progress_bar
+        self.logger = logger
+        self.verbose = verbose
+        self.optimizer = th.optim.Adam(model.parameters(), lr=learning_rate)
+        self._pbar: tqdm | None = None
+
+    def fit(
+        self,
+        observations: th.Tensor | np.ndarray,
+        actions: th.Tensor | np.ndarray,
+        next_observations: th.Tensor | np.ndarray,
+        rewards: th.Tensor | np.ndarray,
+        dones: th.Tensor | np.ndarray | None = None,
+    ) -> dict[str, float]:
+        """Train the ensemble on transitions, with holdout early stopping, then pick the elites.
+
+        ``fit`` makes the parameters trainable again (undoes :meth:`EnsembleDynamics.freeze`) and leaves the
+        model in eval mode.
+
+        :param observations: ``[N, obs_dim]``
+        :param actions: ``[N, action_dim]``
+        :param next_observations: ``[N, obs_dim]`` (the episode's own next observations)
+        :param rewards: ``[N]``
+        :param dones: ``[N]`` termination flags, true terminations only, not time-limit truncations
+            (needed with ``learn_termination``, ignored otherwise)
+        :return: ``holdout_mse`` (raw next-state MSE of the deterministic elite-mean prediction on the
+            holdout), ``no_change_mse`` (same for ``s' = s``), ``holdout_reward_mse``, ``holdout_norm_mse``
+            (elites' mean normalised-target MSE), ``holdout_term_acc`` (with a termination head),
+            ``train_loss``, ``epochs``, ``steps``, ``fit_time`` (seconds)
+        """
+        start = time.perf_counter()
+        model = self.model
+        data = Transitions.from_arrays(model, observations, actions, next_observations, rewards, dones)
+        split = holdout_split(len(data), self.holdout_ratio, self.max_holdout, device=data.observations.device)
+        stats = split_statistics(data.observations, data.actions, data.next_observations, data.rewards, split.train)
+        model.set_normalization(stats)
+        x_hold, y_hold = data.standardized(split.holdout, stats)  # [H, in], [H, D]
+        d_hold = data.done_rows(split.holdout)
+        no_change_mse = float(((data.next_observations[split.holdout] - data.observations[split.holdout]) ** 2).mean())
+        batches = BootstrapBatches(split.train, model.n_members, self.batch_size)
+
+        model.requires_grad_(True)
+        model.train()
+        stopping = EarlyStopping(model, self.patience)
+        self._open_progress()
+        epoch, step, train_loss = 0, 0, float("nan")
+        while self._within_budget(epoch, step):
+            n_steps = self._epoch_steps(batches.steps_per_pass, step)
+            train_loss = self.train_epoch(data, stats, batches, n_steps)
+            epoch, step = epoch + 1, step + n_steps
+            mse, score, raw_state_mse = holdout_scores(model, x_hold, y_hold, d_hold)  # [E]
+            stopping.update(score)
+            record = {
+                "dynamics/train_loss": train_loss,
+                "dynamics/holdout_mse": float(raw_state_mse.mean()),  # members' mean, raw next state
+                "dynamics/no_change_mse": no_change_mse,
+                "dynamics/holdout_norm_mse": float(mse.mean()),
+                "dynamics/best_holdout_norm_mse": float(stopping.best.min()),
+                "dynamics/epoch": epoch,
+                "dynamics/steps": step,
+            }
+            self._report_epoch(record, stopping.epochs_since_improvement)
+            if stopping.should_stop:
+                break
+        self._close_progress()
+        self.optimizer.zero_grad(set_to_none=True)  # leave no stale gradients on the parameters
+
+        # Best weights of every member, then the elites.
+        stopping.restore_best()
+        mse, score, _ = holdout_scores(model, x_hold, y_hold, d_hold)
+        model.set_elites(select_elites(score, model.n_elites))
+        model.eval()
+        metrics = holdout_errors(model, data, split.holdout)
+        metrics.update(
+            holdout_norm_mse=float(mse[model.elites].mean()),
+            train_loss=train_loss,
+            epochs=float(epoch),
+            steps=float(step),
+            fit_time=time.perf_counter() - start,
+        )
+        self._report_fit(metrics)
+        return metrics
+
+    def train_epoch(self, data: Transitions, stats: NormalizationStats, batches: BootstrapBatches, n_steps: int) -> float:
+        """``n_steps`` Adam steps of the ensemble's loss (:meth:`EnsembleDynamics._loss`), all members per step.
+
+        :param data: the transitions
+        :param stats: the normalisation statistics of the training split
+        :param batches: the members' bootstrap minibatches
+        :param n_steps: gradient steps
+        :return: the mean training loss of these steps (NaN-free: 0 for no step)
+        """
+        loss_sum = th.zeros((), device=data.observations.device)
+        for _ in range(n_steps):
+            rows = batches.next_rows()  # [E, b]
+            x, y = data.standardized(rows, stats)  # [E, b, in], [E, b, D]
+            mean, logvar, logit = self.model._forward(x)  # [E, b, D]
+            loss = self.model._loss(mean, logvar, logit, y, data.done_rows(rows))
+            self.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            self.optimizer.step()
+            loss_sum += loss.detach()
+        return float(loss_sum) / max(n_steps, 1)
+
+    def _within_budget(self, epoch: int, step: int) -> bool:
+        """Whether ``max_epochs`` and ``max_steps`` leave room for another epoch.
+
+        :param epoch: epochs done
+        :param step: gradient steps done
+        :return: room for another epoch
+        """
+        return (self.max_epochs is None or epoch < self.max_epochs) and (self.max_steps is None or step < self.max_steps)
+
+    def _epoch_steps(self, steps_per_pass: int, step: int) -> int:
+        """Gradient steps of the next epoch: a pass, capped at ``max_epoch_steps`` and by what ``max_steps`` leaves.
+
+        :param steps_per_pass: steps of one pass over the resample
+        :param step: gradient steps done
+        :return: steps of the next epoch
+        """
+        n_steps = steps_per_pass if self.max_epoch_steps is None else max(1, min(steps_per_pass, self.max_epoch_steps))
+        return n_steps if self.max_steps is None else min(n_steps, self.max_steps - step)
+
+    def _open_progress(self) -> None:
+        """Open the tqdm bar over epochs, with ``progress_bar``."""
+        if self.progress_bar:
+            from tqdm.auto import tqdm
+
+            self._pbar = tqdm(total=self.max_epochs, desc="dynamics", unit="epoch")
+
+    def _close_progress(self) -> None:
+        """Close the tqdm bar, if any."""
+        if self._pbar is not None:
+            self._pbar.close()
+            self._pbar = None
+
+    def _report_epoch(self, record: dict[str, float], epochs_since_improvement: int) -> None:
+        """Log, print and show one epoch's values.
+
+        :param record: the ``dynamics/*`` values of the epoch
+        :param epochs_since_improvement: epochs without an improvement of any member
+        """
+        if self.logger is not None:
+            for key, value in record.items():
+                self.logger.record(key, value)
+            self.logger.dump(step=int(record["dynamics/steps"]))
+        if self.verbose >= 2:
+            r = {key.removeprefix("dynamics/"): value for key, value in record.items()}
+            print(
+                f"dynamics epoch {r['epoch']} steps {r['steps']}: train loss {r['train_loss']:.4f}, "
+                f"holdout next-state mse {r['holdout_mse']:.5f} (no change {r['no_change_mse']:.5f}), "
+                f"normalised {r['holdout_norm_mse']:.5f} (best {r['best_holdout_norm_mse']:.5f}), "
+                f"no improvement for {epochs_since_improvement}"
+            )
+        if self._pbar is not None:
+            self._pbar.update(1)
+            self._pbar.set_postfix(
+                loss=f"{record['dynamics/train_loss']:.3f}", holdout=f"{record['dynamics/holdout_norm_mse']:.4f}"
+            )
+
+    def _report_fit(self, metrics: dict[str, float]) -> None:
+        """Log and print the fit's final metrics.
+
+        :param metrics: what :meth:`fit` returns
+        """
+        step = int(metrics["steps"])
+        if self.logger is not None:
+            for key, value in metrics.items():
+                self.logger.record(f"dynamics/{key}", value)
+            self.logger.dump(step=step)
+        if self.verbose >= 1:
+            print(
+                f"dynamics fit: {int(metrics['epochs'])} epochs, {step} steps, {metrics['fit_time']:.1f} s; holdout "
+                f"next-state mse {metrics['holdout_mse']:.5f} vs no-change {metrics['no_change_mse']:.5f}, "
+                f"reward mse {metrics['holdout_reward_mse']:.5f}, elites {self.model.elites.tolist()}"
+            )
