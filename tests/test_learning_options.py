@@ -1,6 +1,6 @@
 """The options for POLA's learning quality on locomotion data (issue #12): each behaves as documented.
 
-The update with every option is also checked against the plain reference in ``test_speed.py``.
+The update with every option is also checked against the plain reference in ``test_reference_equivalence.py``.
 """
 
 from __future__ import annotations

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
-from typing import Any
 
 import torch as th
 from torch import nn
@@ -20,25 +19,14 @@ from torch.nn import functional as F
 from torch.utils._python_dispatch import _get_current_dispatch_mode
 
 # e^x (e^x + 2) overflows float32 beyond x ~ 44; from x = 20 on, n / (n + 2) == 1 in float32
-_EXP_CLAMP = 20.0
+EXP_CLAMP = 20.0
 
 
 def mish_exp(x: th.Tensor) -> th.Tensor:
     """``mish(x) = x * n / (n + 2)``, ``n = e^x (e^x + 2)``: Mish with one ``exp`` (meant to be compiled)."""
-    e = th.exp(x.clamp(max=_EXP_CLAMP))
+    e = th.exp(x.clamp(max=EXP_CLAMP))
     n = e * (e + 2.0)
     return x * n / (n + 2.0)
-
-
-def inference_mish(x: th.Tensor) -> th.Tensor:
-    """Mish for the no-grad sampling chain, eager: :func:`mish_exp` on tensors of a few thousand elements or
-    more, where its cheap ``exp`` beats ``F.mish``'s three transcendentals (2x at 64k elements on one CPU
-    core), ``F.mish`` below, where each extra kernel launch costs more than it saves. No autograd."""
-    if x.numel() < 4096 or x.device.type != "cpu":  # on GPUs F.mish is one fused kernel already
-        return F.mish(x)
-    e = x.clamp(max=_EXP_CLAMP).exp_()
-    n = e.add(2.0).mul_(e)  # e^x (e^x + 2)
-    return n.div_(n + 2.0).mul_(x)
 
 
 # below this many elements the eager kernel wins: a compiled call's fixed overhead (guards) exceeds the saving
@@ -79,4 +67,4 @@ def fused_activation(activation_fn: type[nn.Module]) -> type[nn.Module]:
     return FusedMish if activation_fn is nn.Mish else activation_fn
 
 
-__all__: list[Any] = ["FusedMish", "compiled_mish", "fused_activation", "inference_mish", "mish_exp"]
+__all__: list[str] = ["EXP_CLAMP", "FusedMish", "compiled_mish", "fused_activation", "mish_exp"]

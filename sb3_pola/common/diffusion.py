@@ -85,6 +85,20 @@ class NoiseSchedule(nn.Module):
         coefficients["noise_std"] = noise_std
         for name, value in coefficients.items():
             self.register_buffer(name, value.float(), persistent=False)
+        # per step (sqrt(1/abar_t), sqrt(1/abar_t - 1), posterior mean coefficients c1, c2, sigma_t) as Python
+        # floats, for the fast chains (sb3_pola.pola.fast_sampling, export): constants of a compiled graph
+        self.step_constants: list[tuple[float, float, float, float, float]] = [
+            (
+                float(self.sqrt_recip_alphas_cumprod[t]),
+                float(self.sqrt_recipm1_alphas_cumprod[t]),
+                float(self.posterior_mean_coef1[t]),
+                float(self.posterior_mean_coef2[t]),
+                float(self.noise_std[t]),
+            )
+            for t in range(n_steps)
+        ]
+        # c1 >= 0 lets the fast no-grad chain fold c1 into the clip: c1 clip(z, -1, 1) = clip(c1 z, -c1, c1)
+        assert all(c[2] >= 0.0 for c in self.step_constants)
 
     # Buffers declared for type checkers
     betas: th.Tensor

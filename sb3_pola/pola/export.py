@@ -86,7 +86,7 @@ class DeterministicPolicyGraph(nn.Module):
             self.register_buffer("action_high", th.as_tensor(policy.action_space.high, dtype=th.float32).flatten())
         # (sqrt(1 / abar_t), sqrt(1 / abar_t - 1), posterior mean coefficients c1, c2) per step: Python floats,
         # constants of the unrolled graph
-        self.step_coefs = [coefs[:4] for coefs in actor._step_coefs]
+        self.step_coefs = [coefs[:4] for coefs in actor.schedule.step_constants]
         self.obs_dim = int(self.obs_mean.shape[0])
         self.action_dim = a_dim
         self.eval()
@@ -107,7 +107,7 @@ class DeterministicPolicyGraph(nn.Module):
                 h = h + F.linear(action, self.w_action)
             eps = self.trunk(h)  # [B, A]
             recip, recipm1, coef1, coef2 = self.step_coefs[t]
-            # DDPM posterior mean with the predicted x_0 clipped to the action bounds (eq. 5)
+            # NoiseSchedule.step without noise: the posterior mean with the predicted x_0 clipped to the action bounds
             if action is None:
                 action = (eps * -recipm1).clamp(-1.0, 1.0) * coef1
             else:

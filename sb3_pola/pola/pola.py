@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import pathlib
-import warnings
 from collections.abc import Callable, Iterator
 from typing import Any, ClassVar, TypeVar
 
@@ -16,10 +16,12 @@ from stable_baselines3.common.utils import FloatSchedule
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
+from sb3_pola.common.compile import CompiledLoss
 from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.common.termination import TerminationFn, get_termination_fn
 from sb3_pola.pola.export import export_policy
+from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
 from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy
 
 SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
@@ -29,33 +31,6 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
     """Polyak update ``target <- (1 - tau) target + tau param`` of all tensors in one ``_foreach_lerp_`` call."""
     with th.no_grad():
         th._foreach_lerp_(list(target_params), list(params), tau)
-
-
-def _eager_fallback(compiled: Callable[..., Any], eager: Callable[..., Any]) -> Callable[..., Any]:
-    """``compiled``, or ``eager`` (with a warning) for good if its first call, the compilation, fails.
-
-    Tracing runs on fake tensors, so a failed compilation has drawn no random numbers and changed nothing.
-    """
-    state: dict[str, bool | None] = {"compiled": None}
-
-    def call(*args: Any) -> Any:
-        if state["compiled"] is False:
-            return eager(*args)
-        try:
-            out = compiled(*args)
-        except Exception as error:
-            if state["compiled"]:
-                raise  # it ran compiled before: a real error, not a compiler one
-            state["compiled"] = False
-            warnings.warn(
-                f"compile_update: compilation failed ({type(error).__name__}: {str(error)[:300]}); training eagerly",
-                stacklevel=3,
-            )
-            return eager(*args)
-        state["compiled"] = True
-        return out
-
-    return call
 
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
@@ -74,7 +49,7 @@ def lookahead_q_objective(
     normalization: str = "first",
     q_scale_floor: float = 0.0,
 ) -> tuple[th.Tensor, th.Tensor]:
-    """``L_q`` of eq. 4 from the ensemble's Q-values along the look-ahead.
+    """``L_q`` of eq. 4 (eq. 3 with the ensemble's top-K) from the ensemble's Q-values along the look-ahead.
 
     :param q: ``[N, T+1, B]`` Q-values of every member at ``(s_{t+i}, a_{t+i})``
     :param alive: ``[T+1, B]`` 1 while no earlier or current look-ahead state is terminal, else 0
@@ -90,6 +65,7 @@ def lookahead_q_objective(
     per_step = (alive * q_top_k).mean(dim=1)  # [T+1]
     # scale-free Q term (Diffusion-QL): divide by the detached mean |Q| at the current states
     q_scale = q_top_k[0].abs().mean().detach().clamp_min(max(q_scale_floor, 1e-6))
+    # eq. 3 / 4: L_q = -sum_{i=0..T} gamma^i (1/K) topK_j Q_j(s_{t+i}, a_{t+i}), terms after a terminal state masked
     return -(lookahead_weights(gamma_powers, normalization) * per_step).sum() / q_scale, per_step
 
 
@@ -276,8 +252,7 @@ class POLA(OfflineAlgorithm):
         self.dynamics_fit_kwargs = dynamics_fit_kwargs or {}
         self.dynamics_fit_info: dict[str, float] = {}
         self.compile_update = compile_update
-        self._compiled_loss_fns: tuple[Any, Any] | None = None
-        if compile_update:  # Mish as one exp inside the compiled graph (1.5x vs eager on CPU, 1.1x with F.mish's form)
+        if compile_update:  # Mish as one exp inside the compiled graph: inductor fuses it into a single kernel
             self.policy_kwargs = {"compile_activations": True, **self.policy_kwargs}
         if _init_setup_model:
             self._setup_model()
@@ -309,6 +284,16 @@ class POLA(OfflineAlgorithm):
         self._create_aliases()
         self._gamma_powers = th.tensor([self.gamma**i for i in range(self.rollout_length + 1)], device=self.device)
         self._eta_value = th.zeros((), device=self.device)  # this step's eta, a tensor so a compiled graph reads it
+        # eq. 5's chain in its fast forms (sb3_pola.pola.fast_sampling, tested equal to DiffusionActor.sample): the
+        # actor's samples need gradients; the target's do not, but a compiled graph traces the differentiable
+        # form (the no-grad one rebuilds its weights in Python each call)
+        self._sample_actor: Callable[[th.Tensor], th.Tensor] = functools.partial(sample_chain, self.policy.actor)
+        if self.compile_update:
+            self._sample_target: Callable[[th.Tensor], th.Tensor] = functools.partial(sample_chain, self.policy.actor_ema)
+        else:
+            self._sample_target = functools.partial(sample_no_grad, self.policy.actor_ema, copy_weights=True)
+        self._critic_loss_fn = CompiledLoss(self._critic_loss, self.compile_update, self._cudagraphs, starts_step=True)
+        self._actor_loss_fn = CompiledLoss(self._actor_loss, self.compile_update, self._cudagraphs)
 
     @property
     def _cudagraphs(self) -> bool:
@@ -328,7 +313,10 @@ class POLA(OfflineAlgorithm):
             "_termination_fn",
             "_gamma_powers",
             "_eta_value",
-            "_compiled_loss_fns",
+            "_sample_actor",
+            "_sample_target",
+            "_critic_loss_fn",
+            "_actor_loss_fn",
             "eta_schedule",
         ]
 
@@ -369,22 +357,18 @@ class POLA(OfflineAlgorithm):
         """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics."""
         obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
         rewards, dones = batch.rewards.flatten(), batch.dones.flatten()
-        critic_loss_fn, actor_loss_fn = self._loss_fns()
-        if self._cudagraphs:
-            th.compiler.cudagraph_mark_step_begin()  # a new iteration: earlier graph outputs are consumed
 
-        critic_loss, critic_stats = critic_loss_fn(obs, actions, next_obs, rewards, dones)
+        # critic: TD regression on the pessimistic target (section IV)
+        critic_loss, critic_stats = self._critic_loss_fn(obs, actions, next_obs, rewards, dones)
         self.critic.optimizer.zero_grad(set_to_none=True)
         critic_loss.backward()
-        critic_loss = critic_loss.detach()
-        if self._cudagraphs:  # the actor graph's run may start a new CUDA-graph iteration and reuse these outputs
-            critic_loss, critic_stats = critic_loss.clone(), {k: v.clone() for k, v in critic_stats.items()}
         critic_grad_norm = self._clip(self.critic.parameters())
         self.critic.optimizer.step()
 
+        # actor: L_d + eta L_q (eq. 6, eq. 4), the critic fixed
         self._eta_value.fill_(float(self.eta_schedule(self._current_progress_remaining)))
         with self._critic_frozen():
-            actor_loss, actor_stats = actor_loss_fn(obs, actions, self._eta_value)
+            actor_loss, actor_stats = self._actor_loss_fn(obs, actions, self._eta_value)
         self.actor.optimizer.zero_grad(set_to_none=True)
         actor_loss.backward()
         actor_grad_norm = self._clip(self.actor.parameters())
@@ -399,8 +383,8 @@ class POLA(OfflineAlgorithm):
 
         # losses first: a divergence message names the first few non-finite statistics
         return {
-            "critic_loss": critic_loss,
-            "actor_loss": actor_loss.detach(),
+            "critic_loss": critic_stats["critic_loss"],
+            "actor_loss": actor_stats["actor_loss"],
             **actor_stats,
             **critic_stats,
             "critic_grad_norm": critic_grad_norm,
@@ -420,15 +404,15 @@ class POLA(OfflineAlgorithm):
         self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor, dones: th.Tensor
     ) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """TD loss of every ensemble member on the pessimistic target, min over the target ensemble (section IV)."""
-        policy = self.policy
         with th.no_grad():
-            next_actions = policy.actor_ema.sample(policy.actor_features(next_obs))
+            next_actions = self._sample_target(self.policy.actor_features(next_obs))  # a' from the EMA actor
             next_q = self.critic_target(next_obs, next_actions).min(dim=0).values  # [B]
             target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
         current_q = self.critic(obs, actions)  # [N, B]
         critic_loss = (current_q - target_q).pow(2).mean(dim=1).sum()
         q = current_q.detach()
-        return critic_loss, {"q_mean": q.mean(), "q_ensemble_std": q.std(dim=0).mean(), "target_q": target_q.mean()}
+        stats = {"q_mean": q.mean(), "q_ensemble_std": q.std(dim=0).mean(), "target_q": target_q.mean()}
+        return critic_loss, {"critic_loss": critic_loss.detach(), **stats}
 
     @property
     def _behaviour_cloning(self) -> bool:
@@ -446,35 +430,19 @@ class POLA(OfflineAlgorithm):
         else:
             q_loss = th.zeros((), device=obs.device)
             actor_loss = bc_loss
-        return actor_loss, {"bc_loss": bc_loss.detach(), "q_loss": q_loss.detach(), "eta": eta.detach(), **stats}
-
-    def _loss_fns(self) -> tuple[Any, Any]:
-        """The critic and actor loss functions: the methods themselves, or their ``torch.compile``'d graphs.
-
-        With ``compile_update`` both losses (forward and backward) are compiled for the static shapes of
-        training; on CUDA they are also captured as CUDA graphs (inductor's ``triton.cudagraphs``).
-        ``fallback_random`` keeps the random draws those of eager PyTorch, so on CPU the compiled update gives
-        the eager update's numbers up to float rounding. The optimizer steps, clipping, EMA and Polyak
-        updates stay eager (a few fused ``_foreach`` kernels).
-        """
-        if self._compiled_loss_fns is not None:
-            return self._compiled_loss_fns
-        if not self.compile_update:
-            return self._critic_loss, self._actor_loss
-        options: dict[str, Any] = {"fallback_random": True}
-        if self._cudagraphs:
-            options["triton.cudagraphs"] = True
-        self._compiled_loss_fns = (
-            _eager_fallback(th.compile(self._critic_loss, dynamic=False, options=options), self._critic_loss),
-            _eager_fallback(th.compile(self._actor_loss, dynamic=False, options=options), self._actor_loss),
-        )
-        return self._compiled_loss_fns
+        return actor_loss, {
+            "actor_loss": actor_loss.detach(),
+            "bc_loss": bc_loss.detach(),
+            "q_loss": q_loss.detach(),
+            "eta": eta.detach(),
+            **stats,
+        }
 
     def _lookahead_q_loss(self, obs: th.Tensor, features: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """``L_q`` of eq. 4: top-K pessimistic Q at ``s_t`` and at ``T`` model-predicted states, weighted by ``gamma^i``."""
         policy, horizon = self.policy, self.rollout_length
         batch_size = obs.shape[0]
-        action = self.actor.sample(features)  # a_t = pi(s_t), differentiable through the reverse chain
+        action = self._sample_actor(features)  # a_t = pi(s_t), differentiable through the reverse chain
         saturation = (action.detach().abs() > 0.99).float().mean()
         states, actions_, alive = [obs], [action], [th.ones(batch_size, device=obs.device)]
         disagreements: list[th.Tensor] = []  # [B] per look-ahead step, the model's doubt about s_{t+i}
@@ -492,7 +460,7 @@ class POLA(OfflineAlgorithm):
             disagreements.append(alive[-1] * disagreement)
             alive.append(alive[-1] * (1.0 - terminal))
             state = next_state if self.backprop_through_model else next_state.detach()
-            action = self.actor.sample(policy.actor_features(state))  # a_{t+i} = pi(s_{t+i})
+            action = self._sample_actor(policy.actor_features(state))  # a_{t+i} = pi(s_{t+i})
             states.append(state)
             actions_.append(action)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import copy
 import itertools
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import torch as th
@@ -14,18 +14,19 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 from torch.nn import functional as F
 
-from sb3_pola.common.activations import fused_activation, inference_mish
+from sb3_pola.common.activations import fused_activation
 from sb3_pola.common.diffusion import NoiseSchedule
 from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.torch_layers import SinusoidalPosEmb, StateProductsExtractor, vectorized_mlp
+from sb3_pola.pola.fast_sampling import sample_no_grad
 
 
 class DiffusionActor(nn.Module):
     """Conditional DDPM over actions in ``[-1, 1]``: the noise predictor ``eps_theta(a_t, s_new, t)`` of eq. 5 / 6.
 
-    The MLP sees ``[a_t, time_embedding(t), state_features]`` (Diffusion-QL's layout). Sampling
-    splits its first layer by input block so the state's projection is computed once per
-    sample instead of once per denoising step (same numbers as the concatenated layer).
+    The MLP sees ``[a_t, time_embedding(t), state_features]`` (Diffusion-QL's layout). :meth:`sample` and
+    :meth:`loss` are the paper's equations as written; :mod:`sb3_pola.pola.fast_sampling` holds the same
+    chain in fewer operations, which training and ``predict`` run.
 
     :param features_dim: size of the state features (``s_new`` with the products)
     :param action_dim: action size
@@ -37,6 +38,7 @@ class DiffusionActor(nn.Module):
     """
 
     optimizer: th.optim.Optimizer
+    step_indices: th.Tensor
 
     def __init__(
         self,
@@ -66,22 +68,6 @@ class DiffusionActor(nn.Module):
         layers.append(nn.Linear(net_arch[-1], action_dim))
         self.trunk = nn.Sequential(*layers)
         self.register_buffer("step_indices", th.arange(n_diffusion_steps), persistent=False)
-        # reverse-step coefficients as Python floats: no tensor indexing in the chain
-        sched = self.schedule
-        self._step_coefs = [
-            (
-                float(sched.sqrt_recip_alphas_cumprod[t]),
-                float(sched.sqrt_recipm1_alphas_cumprod[t]),
-                float(sched.posterior_mean_coef1[t]),
-                float(sched.posterior_mean_coef2[t]),
-                float(sched.noise_std[t]) if t > 0 else 0.0,
-            )
-            for t in range(n_diffusion_steps)
-        ]
-        # coef1 >= 0 lets the no-grad chain fold it into the clip: c1 clip(z, -1, 1) = clip(c1 z, -c1, c1)
-        assert all(c[2] >= 0.0 for c in self._step_coefs)
-        self._inference_cache: tuple[tuple[int, ...], _InferencePlan] | None = None
-        self._plan_params: list[nn.Parameter] | None = None
 
     @property
     def n_diffusion_steps(self) -> int:
@@ -97,64 +83,8 @@ class DiffusionActor(nn.Module):
         t = th.randint(0, self.n_diffusion_steps, (actions.shape[0],), device=actions.device)
         noise = th.randn_like(actions)
         x_t = self.schedule.add_noise(actions, noise, t)
+        # eq. 6: || eps - eps_theta(sqrt(abar_t) a + sqrt(1 - abar_t) eps, s_new, t) ||^2
         return F.mse_loss(self.predict_noise(x_t, t, features), noise)
-
-    def _time_projection(self) -> th.Tensor:
-        """``[n, H]`` projection of every step's time embedding by the first layer (cached without autograd)."""
-        t_dim, a_dim = self.time_embedding_dim, self.action_dim
-        if (th.is_grad_enabled() and self.input_layer.weight.requires_grad) or th.compiler.is_compiling():
-            return F.linear(self.time_mlp(self.step_indices), self.input_layer.weight[:, a_dim : a_dim + t_dim])
-        return self._inference_plan().time_proj
-
-    def _inference_plan(self) -> _InferencePlan:
-        """Weights rearranged for the no-grad chain, cached.
-
-        The cache is keyed on every parameter's version counter and storage: optimizer steps, EMA updates
-        and ``load_state_dict`` are in place and bump the counters, ``.to()`` moves the storage. Writing
-        through ``.data`` bumps nothing, so code that does must call :meth:`clear_inference_cache`.
-        """
-        if self._plan_params is None:  # the parameter objects never change; their values and storage do
-            self._plan_params = list(self.parameters())
-        key = tuple(v for p in self._plan_params for v in (p._version, p.data_ptr()))
-        if self._inference_cache is None or self._inference_cache[0] != key:
-            with th.no_grad():
-                plan = self._build_inference_plan()
-            self._inference_cache = (key, plan)
-        return self._inference_cache[1]
-
-    def clear_inference_cache(self) -> None:
-        """Forget the cached inference weights (needed only after writing parameters through ``.data``)."""
-        self._inference_cache = None
-        self._plan_params = None
-
-    def _build_inference_plan(self) -> _InferencePlan:
-        t_dim, a_dim = self.time_embedding_dim, self.action_dim
-        time_proj = F.linear(self.time_mlp(self.step_indices), self.input_layer.weight[:, a_dim : a_dim + t_dim])
-        modules = list(self.trunk)
-        hidden: list[tuple[th.Tensor, th.Tensor] | Any] = []
-        for module in modules[:-1]:
-            if isinstance(module, nn.Linear):  # [B, in] @ [in, out]: contiguous W^T is the faster GEMM layout
-                hidden.append((module.bias.detach(), module.weight.detach().t().contiguous()))
-            else:
-                hidden.append(inference_mish if type(module) is nn.Mish else module)
-        last = modules[-1]
-        assert isinstance(last, nn.Linear)
-        # the last layer with the reverse step folded in (eq. 5, x0 clipped): with eps = W h + b,
-        # c1 x0 = clip(c1 recip x - c1 recipm1 (W h + b), -c1, c1); per step: W^T scale alpha_t, bias_t
-        steps = []
-        for recip, recipm1, coef1, coef2, sigma in self._step_coefs:
-            alpha = -recipm1 * coef1
-            steps.append((alpha, last.bias.detach() * alpha, recip * coef1, coef1, coef2, sigma))
-        weight = self.input_layer.weight.detach()
-        return _InferencePlan(
-            w_state_t=weight[:, a_dim + t_dim :].t().contiguous(),
-            b_in=self.input_layer.bias.detach(),
-            w_action_t=weight[:, :a_dim].t().contiguous(),
-            time_proj=time_proj,
-            hidden=hidden,
-            w_last_t=last.weight.detach().t().contiguous(),
-            steps=steps,
-        )
 
     def sample(self, features: th.Tensor, generator: th.Generator | None = None, deterministic: bool = False) -> th.Tensor:
         """Draw actions with the reverse chain (eq. 5), differentiable w.r.t. the parameters and ``features``.
@@ -166,83 +96,17 @@ class DiffusionActor(nn.Module):
             (on InvertedPendulum it dropped a policy's return from 1000 to 58); the mean path does not.
         :return: ``[B, A]`` actions in ``[-1, 1]``
         """
-        a_dim, t_dim = self.action_dim, self.time_embedding_dim
-        shape = (self.n_diffusion_steps + 1, features.shape[0], a_dim)
-        # eager inference takes the cached plan; a compiled graph traces the plain chain (the cache is Python state)
-        if not th.is_grad_enabled() and not th.compiler.is_compiling():
-            if deterministic:
-                return self._sample_no_grad(features, None)
-            noise = th.randn(shape, device=features.device, dtype=features.dtype, generator=generator)
-            return self._sample_no_grad(features, noise)
-        weight = self.input_layer.weight  # [H, A + time + F]
-        # constant over the chain: state and time projections, computed once, summed per step up front
-        state_proj = F.linear(features, weight[:, a_dim + t_dim :], self.input_layer.bias)  # [B, H]
-        step_bias = state_proj.unsqueeze(0) + self._time_projection().unsqueeze(1)  # [n, B, H]
-        w_action_t = weight[:, :a_dim].t()  # [A, H]
-        if deterministic:
-            noise = th.zeros(shape, device=features.device, dtype=features.dtype)
-        else:
-            noise = th.randn(shape, device=features.device, dtype=features.dtype, generator=generator)
-        x = noise[-1]  # a_T ~ N(0, I)
+        batch_size = features.shape[0]
+        shape = (self.n_diffusion_steps + 1, batch_size, self.action_dim)
+        noise = None if deterministic else th.randn(shape, device=features.device, dtype=features.dtype, generator=generator)
+        # a_T ~ N(0, I) (0 for the deterministic chain)
+        x = th.zeros(shape[1:], device=features.device, dtype=features.dtype) if noise is None else noise[-1]
         for t in reversed(range(self.n_diffusion_steps)):
-            eps = self.trunk(th.addmm(step_bias[t], x, w_action_t))
-            # NoiseSchedule.step with float coefficients: x0 = clip(x / sqrt(abar) - sqrt(1/abar - 1) eps),
-            # x_{t-1} = c1 x0 + c2 x + sigma_t z (no noise at t = 0)
-            recip, recipm1, coef1, coef2, sigma = self._step_coefs[t]
-            x0 = (x * recip - eps * recipm1).clamp_(-1.0, 1.0)
-            x_new = th.add(x0 * coef1, x, alpha=coef2)
-            x = x_new.add_(noise[t], alpha=sigma) if t > 0 else x_new
+            eps = self.predict_noise(x, self.step_indices[t].expand(batch_size), features)
+            # eq. 5: a_{t-1} = mean(a_t, eps_theta(a_t, s_new, t)) + sigma_t z, the mean formed from the predicted a_0
+            # clipped to [-1, 1] (Diffusion-QL; the paper's mean without the clip); no noise at the last step
+            x = self.schedule.step(eps, t, x, None if noise is None else noise[t])
         return x.clamp(-1.0, 1.0)
-
-    def _sample_no_grad(self, features: th.Tensor, noise: th.Tensor | None) -> th.Tensor:
-        """The reverse chain of :meth:`sample` without autograd, from :meth:`_inference_plan`'s weights.
-
-        Same function (float rounding aside), about half the kernel launches: contiguous ``W^T`` GEMMs,
-        the step's coefficients folded into the last layer's ``addmm`` and the clip, in-place updates.
-
-        :param features: ``[B, F]`` state features
-        :param noise: ``[n + 1, B, A]`` noise (``a_T`` last); ``None``: the deterministic chain from ``a_T = 0``
-        """
-        if features.shape[0] > _INFERENCE_CHUNK:  # rows are independent: chunks keep every temporary in cache
-            chunks = features.split(_INFERENCE_CHUNK)
-            noises = [None] * len(chunks) if noise is None else noise.split(_INFERENCE_CHUNK, dim=1)
-            return th.cat([self._sample_no_grad(f, z) for f, z in zip(chunks, noises, strict=True)])
-        plan = self._inference_plan()
-        state_proj = th.addmm(plan.b_in, features, plan.w_state_t)  # [B, H]
-        step_bias = state_proj.unsqueeze(0) + plan.time_proj.unsqueeze(1)  # [n, B, H]
-        x = None if noise is None else noise[-1]
-        for t in reversed(range(self.n_diffusion_steps)):
-            h = step_bias[t] if x is None else th.addmm(step_bias[t], x, plan.w_action_t)
-            for layer in plan.hidden:
-                h = th.addmm(layer[0], h, layer[1]) if isinstance(layer, tuple) else layer(h)
-            alpha, bias_t, x_coef, coef1, coef2, sigma = plan.steps[t]
-            # x_{t-1} = c1 clip(recip x - recipm1 eps, -1, 1) + c2 x (+ sigma_t z)
-            base = bias_t if x is None else th.add(bias_t, x, alpha=x_coef)
-            x_new = th.addmm(base, h, plan.w_last_t, alpha=alpha).clamp_(-coef1, coef1)
-            if x is not None:
-                x_new.add_(x, alpha=coef2)
-            if noise is not None and t > 0:
-                x_new.add_(noise[t], alpha=sigma)
-            x = x_new
-        assert x is not None
-        return x.clamp_(-1.0, 1.0)
-
-
-# rows per chunk of the no-grad chain: [256, 256] float32 temporaries (256 KB) stay in L2 and below glibc's
-# mmap threshold; at 1024 rows every temporary was a fresh 1 MB mapping and elementwise ops ran 3-6x slower
-_INFERENCE_CHUNK = 256
-
-
-class _InferencePlan(NamedTuple):
-    """Weights of :meth:`DiffusionActor._sample_no_grad`, derived from the parameters (never saved)."""
-
-    w_state_t: th.Tensor  # [F, H]: the first layer's state block, transposed
-    b_in: th.Tensor  # [H]: the first layer's bias
-    w_action_t: th.Tensor  # [A, H]: the first layer's action block, transposed
-    time_proj: th.Tensor  # [n, H]: each step's time embedding through the first layer
-    hidden: list[Any]  # the trunk but its last layer: (bias, W^T) pairs and activation functions
-    w_last_t: th.Tensor  # [H, A]: W^T of the last layer
-    steps: list[tuple[float, th.Tensor, float, float, float, float]]  # per step: alpha, alpha b, c1 recip, c1, c2, sigma
 
 
 class EnsembleCritic(nn.Module):
@@ -444,15 +308,16 @@ class POLAPolicy(BasePolicy):
         obs = observation.float()
         n = self.n_action_samples
         actor = self.actor_ema if self.predict_actor == "ema" else self.actor
+        # the fast form of actor.sample (same function, float rounding aside): predict needs no gradient
         if n == 1:
-            return actor.sample(self.actor_features(obs), deterministic=deterministic)
+            return sample_no_grad(actor, self.actor_features(obs), deterministic=deterministic)
         generator = None
         if deterministic:
             generator = th.Generator(device=obs.device)
             generator.manual_seed(self.predict_seed)
         batch_size = obs.shape[0]
         obs_rep = obs.repeat_interleave(n, dim=0)  # [B * n, obs]
-        actions = actor.sample(self.actor_features(obs_rep), generator=generator)  # [B * n, A]
+        actions = sample_no_grad(actor, self.actor_features(obs_rep), generator=generator)  # [B * n, A]
         q = self.critic_target(obs_rep, actions).min(dim=0).values.view(batch_size, n)  # [B, n]
         if deterministic:
             idx = q.argmax(dim=1)
@@ -462,7 +327,7 @@ class POLAPolicy(BasePolicy):
 
     def set_training_mode(self, mode: bool) -> None:
         # targets and the EMA copy stay in eval mode; they have no dropout/batch-norm, so this is for clarity only.
-        # predict() calls this every time: walking the ~30 submodules cost ~40% of a single-observation predict
+        # predict() calls this every time: walking every submodule would cost a large part of a single predict
         for module in (self.actor, self.critic):
             if module.training != mode:
                 module.train(mode)

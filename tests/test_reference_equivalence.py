@@ -1,6 +1,8 @@
-"""The optimised gradient step and sampling give the numbers of a plain reference written from the paper's equations.
+"""The fast paths give the numbers of the readable ones written from the paper's equations.
 
-No timings here (speed is measured by ``sb3-pola bench``); these tests pin the math the optimisations must keep.
+The gradient step against a plain reference of eq. 3-6, the fast samplers (:mod:`sb3_pola.pola.fast_sampling`)
+against :meth:`DiffusionActor.sample` (eq. 5), the compiled update against the eager one, the fused Mish against
+``F.mish``. No timings here (speed is measured by ``sb3-pola bench``).
 """
 
 from __future__ import annotations
@@ -10,11 +12,14 @@ import math
 
 import pytest
 import torch as th
+from pola_data import model_on_dataset, synthetic_dataset
+from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
-from sb3_pola.benchmarks.common import make_pola, synthetic_dataset
 from sb3_pola.common import activations
 from sb3_pola.common.activations import FusedMish, compiled_mish, mish_exp
+from sb3_pola.pola import fast_sampling
+from sb3_pola.pola.fast_sampling import inference_mish, sample_chain, sample_no_grad
 
 RTOL, ATOL = 1e-4, 1e-5
 
@@ -33,7 +38,7 @@ def _model(**kwargs):
         dynamics_kwargs={"n_members": 3, "n_elites": 2, "hidden_dim": 16, "n_layers": 2},
     )
     params.update(kwargs)
-    return make_pola(data, **params)
+    return model_on_dataset(data, **params)
 
 
 def ref_q(critic, obs: th.Tensor, actions: th.Tensor, detach: bool = False) -> th.Tensor:
@@ -181,35 +186,106 @@ def test_update_matches_reference(kwargs):
         _close(got, want)
 
 
-def test_sample_matches_reference_and_time_cache_follows_updates():
-    model = _model()
-    actor = model.policy.actor_ema
-    feats = model.policy.actor_features(th.randn(16, 5))
+def test_readable_sample_is_the_reference_chain():
+    actor = _model().policy.actor_ema
+    feats = th.randn(16, actor.features_dim)
+    with th.no_grad():
+        _close(
+            actor.sample(feats, generator=th.Generator().manual_seed(3)),
+            ref_sample(actor, feats, th.Generator().manual_seed(3)),
+        )
+        # the deterministic chain: the posterior means from a_T = 0
+        x = th.zeros(16, actor.action_dim)
+        for t in reversed(range(actor.n_diffusion_steps)):
+            x = actor.schedule.step(actor.predict_noise(x, th.full((16,), t), feats), t, x, None)
+        _close(actor.sample(feats, deterministic=True), x.clamp(-1.0, 1.0))
+
+
+@pytest.mark.parametrize("fast", ["sample_chain", "sample_no_grad", "sample_no_grad_copies"])
+@pytest.mark.parametrize("deterministic", [False, True])
+def test_fast_samplers_equal_readable_sample(fast, deterministic):
+    """Each fast form of eq. 5 draws the same noise and gives the same actions as ``DiffusionActor.sample``."""
+    fns = {
+        "sample_chain": sample_chain,
+        "sample_no_grad": sample_no_grad,
+        "sample_no_grad_copies": lambda *args, **kwargs: sample_no_grad(*args, copy_weights=True, **kwargs),
+    }
+    actor = _model(n_diffusion_steps=4).policy.actor
+    feats = th.randn(16, actor.features_dim, requires_grad=True)
     for _ in range(2):
-        with th.no_grad():
-            got = actor.sample(feats, generator=th.Generator().manual_seed(3))
-            want = ref_sample(actor, feats, generator=th.Generator().manual_seed(3))
+        got = fns[fast](actor, feats, generator=th.Generator().manual_seed(3), deterministic=deterministic)
+        want = actor.sample(feats, generator=th.Generator().manual_seed(3), deterministic=deterministic)
         _close(got, want)
-        # the no-grad deterministic chain (folded coefficients) == the autograd chain's noise-free path
-        with th.no_grad():
-            fast = actor.sample(feats, deterministic=True)
-        _close(fast, actor.sample(feats, deterministic=True))
-        with th.no_grad():  # an in-place update (as EMA / load_state_dict do) must invalidate the cached weights
+        if fast == "sample_chain":  # differentiable, with the readable chain's gradients
+            got_grads = th.autograd.grad(got.square().sum(), [feats, *actor.parameters()])
+            want_grads = th.autograd.grad(want.square().sum(), [feats, *actor.parameters()])
+            for g, w in zip(got_grads, want_grads, strict=True):
+                _close(g, w)
+        with th.no_grad():  # an in-place update: the next round must see it
             for p in actor.parameters():
                 p.add_(0.05 * th.randn_like(p))
 
 
-def test_inference_cache_after_data_writes():
-    actor = _model().policy.actor_ema
-    feats = th.randn(8, actor.features_dim)
+def _write_data(model):
     with th.no_grad():
-        before = actor.sample(feats, deterministic=True)
-        for p in actor.parameters():
-            p.data.mul_(1.5)  # a write that bumps no version counter: the cache cannot see it
-        actor.clear_inference_cache()
-        after = actor.sample(feats, deterministic=True)
-    assert not th.allclose(before, after)
-    _close(after, actor.sample(feats, deterministic=True))  # the autograd chain uses no cache
+        for p in model.policy.actor_ema.parameters():
+            p.data.mul_(1.5)  # bumps no version counter
+
+
+def _write_polyak(model):
+    polyak_update(model.policy.actor.parameters(), model.policy.actor_ema.parameters(), 0.5)
+
+
+def _write_data_assignment(model):
+    for p in model.policy.actor_ema.parameters():
+        p.data = p.data * 0.5 + 0.1  # new storage
+
+
+def _write_load_state_dict(model):
+    other = _model(seed=7)
+    model.policy.load_state_dict(other.policy.state_dict())
+
+
+def _write_set_parameters(model):
+    other = _model(seed=8)
+    model.set_parameters(other.get_parameters())
+
+
+def _write_training_step(model):
+    model._n_updates = 10  # past ema_start; ema_update_freq=1: this step moves the EMA actor
+    model.train(gradient_steps=1, batch_size=32)
+
+
+@pytest.mark.parametrize(
+    "write",
+    [_write_data, _write_polyak, _write_data_assignment, _write_load_state_dict, _write_set_parameters, _write_training_step],
+)
+def test_predict_is_fresh_after_every_weight_write(write):
+    """predict (the cached fast path) after a write of the weights == the readable sampler on the new weights."""
+    model = _model()
+    policy = model.policy
+    obs = th.randn(8, 5)
+    with th.no_grad():
+        policy.actor.input_layer.weight.add_(0.1)  # the online actor differs from the EMA actor (polyak moves it)
+        before = policy._predict(obs, deterministic=True).clone()
+    write(model)
+    with th.no_grad():
+        after = policy._predict(obs, deterministic=True)
+        want = policy.actor_ema.sample(policy.actor_features(obs), deterministic=True)
+    assert not th.allclose(before, want), "the write did not change the policy: the test would prove nothing"
+    _close(after, want)
+    _close(sample_no_grad(policy.actor_ema, policy.actor_features(obs), deterministic=True), want)
+
+
+def test_predict_uses_one_cached_plan_until_a_write():
+    """Between writes, predict reuses its plan (the fast path stays fast); a write through .data rebuilds it."""
+    actor = _model().policy.actor_ema
+    feats = th.randn(4, actor.features_dim)
+    plan = fast_sampling.cached_view_plan(actor)
+    sample_no_grad(actor, feats, deterministic=True)
+    assert fast_sampling.cached_view_plan(actor) is plan
+    actor.time_mlp[1].weight.data.mul_(2.0)
+    assert fast_sampling.cached_view_plan(actor) is not plan
 
 
 def test_mish_exp_equals_mish():
@@ -275,7 +351,8 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path):
     assert graphs[0] > 0 and graphs[-1] == graphs[0], "the compiled losses were recompiled after the first step"
     for got, want in zip(compiled.policy.parameters(), eager.policy.parameters(), strict=True):
         _close(got, want)
-    assert compiled._compiled_loss_fns is not None and eager._compiled_loss_fns is None
+    assert compiled._critic_loss_fn.compiled_ok and compiled._actor_loss_fn.compiled_ok
+    assert eager._critic_loss_fn.compiled is None and eager._actor_loss_fn.compiled is None
 
 
 def test_compile_update_falls_back_to_eager(monkeypatch):
@@ -305,15 +382,16 @@ def test_compile_update_falls_back_to_eager(monkeypatch):
 @pytest.mark.parametrize("shape", [(3, 5), (64, 256), (2, 64, 128)])
 def test_inference_mish_equals_mish(shape):
     x = th.cat((th.linspace(-30, 30, math.prod(shape) - 3), th.tensor([-100.0, 100.0, 0.0]))).reshape(shape)
-    _close(activations.inference_mish(x), F.mish(x))
+    _close(inference_mish(x.clone()), F.mish(x))
 
 
 def test_chunked_sampling_equals_one_pass():
-    """The no-grad chain splits large batches into row chunks: same actions as the unchunked autograd chain."""
+    """The no-grad chain splits large batches into row chunks: same actions as the readable chain."""
     actor = _model().policy.actor_ema
     feats = th.randn(700, actor.features_dim)  # 256 + 256 + 188 rows
-    with th.no_grad():
-        fast = actor.sample(feats, deterministic=True)
-        noisy = actor.sample(feats, generator=th.Generator().manual_seed(0))
-    _close(fast, actor.sample(feats, deterministic=True))
-    _close(noisy, actor.sample(feats, generator=th.Generator().manual_seed(0)))
+    for copy_weights in (False, True):
+        fast = sample_no_grad(actor, feats, deterministic=True, copy_weights=copy_weights)
+        noisy = sample_no_grad(actor, feats, generator=th.Generator().manual_seed(0), copy_weights=copy_weights)
+        with th.no_grad():
+            _close(fast, actor.sample(feats, deterministic=True))
+            _close(noisy, actor.sample(feats, generator=th.Generator().manual_seed(0)))
