@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch as th
-from conftest import ACT_DIM, OBS_DIM
+from helpers import ACT_DIM, OBS_DIM
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.datasets import load_offline_dataset
@@ -67,7 +67,7 @@ def test_obs_stats_and_read_only(data):
 
 def test_model_has_its_buffer_once_built(tiny_dataset: str, tmp_path) -> None:
     """As in SB3, ``model.replay_buffer`` exists once a model is built with its data, before ``learn``."""
-    from pola_data import light_kwargs
+    from helpers import light_kwargs
 
     from sb3_pola.pola import POLA
 

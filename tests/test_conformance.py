@@ -7,14 +7,9 @@ import pathlib
 import numpy as np
 import pytest
 import torch as th
-from pola_data import light_kwargs, record_random_dataset
+from helpers import light_kwargs, record_random_dataset
 
 from sb3_pola import POLA
-
-
-@pytest.fixture(scope="module")
-def pendulum_path(tmp_path_factory) -> str:
-    return str(record_random_dataset(tmp_path_factory.mktemp("data"), "pendulum/random-v0", "Pendulum-v1", 600))
 
 
 def params_equal(a: dict, b: dict) -> bool:

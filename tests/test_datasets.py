@@ -11,7 +11,7 @@ import gymnasium as gym
 import minari
 import numpy as np
 import pytest
-from conftest import ACT_HIGH, ACT_LOW, EPISODES, OBS_DIM, make_episodes, write_minari_dataset
+from helpers import ACT_HIGH, ACT_LOW, EPISODES, OBS_DIM, make_episodes, write_minari_dataset
 
 from sb3_pola.common import datasets as ds
 from sb3_pola.common import scores

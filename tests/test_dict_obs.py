@@ -7,7 +7,7 @@ import pathlib
 import gymnasium as gym
 import numpy as np
 import pytest
-from pola_data import light_kwargs, record_random_dataset
+from helpers import light_kwargs, record_random_dataset
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_pola import POLA

@@ -7,18 +7,13 @@ from __future__ import annotations
 
 import pytest
 import torch as th
-from pola_data import light_kwargs, record_random_dataset
+from helpers import light_kwargs
 
 from sb3_pola import POLA
 from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 from sb3_pola.common.schedules import WarmupSchedule, warmup_schedule
 from sb3_pola.pola.pola import lookahead_q_objective
-
-
-@pytest.fixture(scope="module")
-def pendulum_path(tmp_path_factory) -> str:
-    return str(record_random_dataset(tmp_path_factory.mktemp("data"), "pendulum/random-v0", "Pendulum-v1", 600))
 
 
 # ---------------------------------------------------------------- eta schedule

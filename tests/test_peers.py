@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 import pytest
-from pola_data import record_random_dataset
+from helpers import record_random_dataset
 
 from sb3_pola.common.datasets import load_offline_dataset
 from sb3_pola.experiments import peers, score

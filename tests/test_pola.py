@@ -7,17 +7,12 @@ import os
 import numpy as np
 import pytest
 import torch as th
-from pola_data import light_kwargs, record_random_dataset
+from helpers import light_kwargs
 from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
 
 from sb3_pola import POLA
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
 from sb3_pola.pola.pola import lookahead_q_objective
-
-
-@pytest.fixture(scope="module")
-def pendulum_path(tmp_path_factory) -> str:
-    return str(record_random_dataset(tmp_path_factory.mktemp("data"), "pendulum/random-v0", "Pendulum-v1", 600))
 
 
 # ---------------------------------------------------------------- eq. 4: top-K, gamma^i, terminations

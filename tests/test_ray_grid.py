@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 import torch as th
-from pola_data import record_random_dataset
+from helpers import record_random_dataset
 
 from sb3_pola.experiments import ray_grid, score
 from sb3_pola.pola import POLA

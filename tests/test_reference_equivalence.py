@@ -12,7 +12,7 @@ import math
 
 import pytest
 import torch as th
-from pola_data import model_on_dataset, synthetic_dataset
+from helpers import model_on_dataset, synthetic_dataset
 from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 

@@ -7,7 +7,7 @@ import pathlib
 
 import numpy as np
 import pytest
-from pola_data import record_random_dataset
+from helpers import record_random_dataset
 
 from sb3_pola.experiments import diagnostics, score
 

@@ -12,7 +12,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import yaml
-from pola_data import record_random_dataset
+from helpers import record_random_dataset
 
 pytest.importorskip("rl_zoo3")
 pytest.importorskip("optuna")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -15,6 +15,9 @@ from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils.flop_counter import FlopCounterMode
 
 from sb3_pola.common.datasets import OfflineDataset
+
+if TYPE_CHECKING:
+    from sb3_pola.pola import POLA
 
 # (obs_dim, act_dim, Gymnasium id whose termination rule the look-ahead uses)
 TASK_SIZES: dict[str, tuple[int, int, str]] = {"hopper": (11, 3, "Hopper-v5"), "halfcheetah": (17, 6, "HalfCheetah-v5")}
@@ -45,7 +48,7 @@ def synthetic_dataset(n: int, obs_dim: int, act_dim: int, env_id: str | None = N
     )
 
 
-def make_pola(data: OfflineDataset, device: str = "cpu", seed: int = 0, **kwargs: Any) -> Any:
+def make_pola(data: OfflineDataset, device: str = "cpu", seed: int = 0, **kwargs: Any) -> POLA:
     """A POLA model on an in-memory dataset, ready for ``train``: buffer set up, dynamics frozen as initialised.
 
     The dynamics model is not fitted (its cost per step does not depend on its weights), so the
@@ -59,16 +62,10 @@ def make_pola(data: OfflineDataset, device: str = "cpu", seed: int = 0, **kwargs
     """
     from sb3_pola.pola import POLA
 
-    model = POLA("MlpPolicy", env=None, dataset=None, seed=seed, device=device, _init_setup_model=False, **kwargs)
-    model.observation_space, model.action_space = data.observation_space, data.action_space
-    model._offline_data = data
-    model.env_id = data.env_id
-    model._setup_model()
+    model = POLA("MlpPolicy", dataset=data, seed=seed, device=device, **kwargs)
     model.set_logger(configure(None, [""]))
-    model._setup_offline_data()
     if model.policy.dynamics is not None:
-        model.policy.dynamics.requires_grad_(False)  # as EnsembleDynamics.freeze
-        model.policy.dynamics.eval()
+        model.policy.dynamics.freeze()
         model.policy.dynamics_fitted.fill_(True)  # type: ignore[operator]
     return model
 

@@ -11,12 +11,13 @@ from typing import Any, ClassVar, TypeVar
 
 import torch as th
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.type_aliases import GymEnv, Schedule
+from stable_baselines3.common.type_aliases import GymEnv, ReplayBufferSamples, Schedule
 from stable_baselines3.common.utils import FloatSchedule
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.compile import CompiledLoss
+from sb3_pola.common.datasets import DatasetLocation, OfflineDataset
 from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.common.termination import TerminationFn, get_termination_fn
@@ -169,7 +170,7 @@ class POLA(OfflineAlgorithm):
         self,
         policy: str | type[POLAPolicy],
         env: GymEnv | str | None = None,
-        dataset: Any = None,
+        dataset: DatasetLocation | OfflineDataset | None = None,
         learning_rate: float | Schedule = 3e-4,
         batch_size: int = 256,
         tau: float = 0.005,
@@ -353,7 +354,7 @@ class POLA(OfflineAlgorithm):
             self._accumulate_train_stats(self._update(buffer.sample(batch_size)))
             self._n_updates += 1
 
-    def _update(self, batch: Any) -> dict[str, th.Tensor]:
+    def _update(self, batch: ReplayBufferSamples) -> dict[str, th.Tensor]:
         """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics."""
         obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
         rewards, dones = batch.rewards.flatten(), batch.dones.flatten()
