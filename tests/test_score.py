@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import pathlib
 
 import numpy as np
@@ -224,3 +225,54 @@ def test_eval_rule_during_training(pendulum_root: pathlib.Path, tmp_path: pathli
     assert float(again["ema"]["mean_return"]) == pytest.approx(score.read_rows(base / "scores.csv")[-1]["mean_return"])
     with pytest.raises(ValueError, match="unknown evaluation rule"):
         run(pendulum_root, tmp_path / "bad", "--variants", "T1", "--eval-rule", "best")
+
+
+class _GoalEnv:
+    """Three-step episodes; ``info["success"]`` is true at the last step of every other episode."""
+
+    def __init__(self) -> None:
+        self.episode, self.t = -1, 0
+
+    def reset(self, seed: int | None = None):
+        self.episode, self.t = self.episode + 1, 0
+        return np.zeros(2, dtype=np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        done = self.t == 3
+        return np.zeros(2, dtype=np.float32), 1.0, done, False, {"success": done and self.episode % 2 == 0}
+
+
+class _ConstantModel:
+    def predict(self, obs, deterministic=True):
+        return np.zeros(1, dtype=np.float32), None
+
+    def normalized_score(self, returns):
+        return 100.0 * returns / 3.0
+
+
+def test_success_rate_column(tmp_path: pathlib.Path) -> None:
+    """Goal-reaching envs: the success rate of an evaluation, in scores.csv and table.md; old files keep working."""
+    scores = score.evaluation_scores(_ConstantModel(), _GoalEnv(), 4, seed=0)
+    assert scores["success"] == 0.5 and scores["score"] == 100.0
+    assert math.isnan(score.evaluation_scores(_ConstantModel(), _ConstantEnvWithoutSuccess(), 2, seed=0)["success"])
+    # a scores.csv from before the column: appending rewrites it with the column, old rows get NaN
+    csv_path = tmp_path / "scores.csv"
+    old_fields = [f for f in score.CSV_FIELDS if f != "success"]
+    row = {"dataset": "d", "variant": "T0", "seed": 0, "step": 5, "score": 1.0, "score_std": 0.0, "mean_return": 3.0}
+    row |= {"eval_episodes": 4, "wall_s": 1.0}
+    csv_path.write_text(",".join(old_fields) + "\n" + ",".join(str(row[f]) for f in old_fields) + "\n")
+    assert math.isnan(score.read_rows(csv_path)[0]["success"])
+    score.append_row(csv_path, {**row, "step": 10, **scores})
+    assert csv_path.read_text().splitlines()[0] == ",".join(score.CSV_FIELDS)
+    rows = score.read_rows(csv_path)
+    assert math.isnan(rows[0]["success"]) and rows[1]["success"] == 0.5
+    table = score.markdown_table(rows, ["T0"])
+    assert "final success rate" in table and "| 0.50 |" in table
+    assert "success rate" not in score.markdown_table([{**r, "success": math.nan} for r in rows], ["T0"])
+
+
+class _ConstantEnvWithoutSuccess(_GoalEnv):
+    def step(self, action):
+        obs, reward, terminated, truncated, _ = super().step(action)
+        return obs, reward, terminated, truncated, {}

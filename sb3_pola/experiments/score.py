@@ -194,8 +194,8 @@ PRESETS: dict[str, Config] = {
 }
 DEFAULT_DATASETS = ["halfcheetah/medium-v0", "halfcheetah/medium-replay-v0"]
 DEFAULT_VARIANTS = ["T0", "T1", "T3", "T5", "T3-noproducts", "T3-criticproducts", "BC"]
-CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s"]
-REEVAL_FIELDS = ["dataset", "variant", "seed", "rule", "step", "score", "score_std", "mean_return", "eval_episodes"]
+CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s", "success"]
+REEVAL_FIELDS = ["dataset", "variant", "seed", "rule", "step", "score", "score_std", "mean_return", "eval_episodes", "success"]
 
 
 def resolve_device(device: str) -> str:
@@ -253,7 +253,9 @@ def cell_name(dataset: str, variant: str, seed: int) -> str:
     return f"{slug(dataset)}__{variant}__seed{seed}"
 
 
-def evaluate(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool = True) -> np.ndarray:
+def evaluate(
+    model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool = True, successes: list[bool | None] | None = None
+) -> np.ndarray:
     """Returns of ``n_episodes`` episodes of the model's policy (episode ``i`` reset with ``seed + i``).
 
     :param model: a POLA model
@@ -263,40 +265,53 @@ def evaluate(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bo
         sampled actions repeat (the caller's torch RNG state is restored afterwards, so an evaluation during
         training leaves the training's random stream as it was)
     :param deterministic: ``model.predict``'s flag
+    :param successes: if a list, it receives one entry per episode: whether a step's ``info["success"]`` (or
+        ``info["is_success"]``) was true, as goal-reaching envs such as Gymnasium-Robotics' mazes report it, or
+        ``None`` when the env reports no success
     :return: ``[n_episodes]`` undiscounted returns
     """
     import torch as th
 
+    successes = [] if successes is None else successes
     if deterministic:
-        return _episode_returns(model, env, n_episodes, seed, deterministic)
+        return _episode_returns(model, env, n_episodes, seed, deterministic, successes)
     devices = list(range(th.cuda.device_count())) if th.cuda.is_initialized() else []
     with th.random.fork_rng(devices=devices):
         th.manual_seed(seed)
-        return _episode_returns(model, env, n_episodes, seed, deterministic)
+        return _episode_returns(model, env, n_episodes, seed, deterministic, successes)
 
 
-def _episode_returns(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool) -> np.ndarray:
+def _episode_returns(
+    model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool, successes: list[bool | None]
+) -> np.ndarray:
     returns = np.zeros(n_episodes)
     for i in range(n_episodes):
         obs, _ = env.reset(seed=seed + i)
-        done = False
+        done, success = False, None
         while not done:
             action, _ = model.predict(obs, deterministic=deterministic)
-            obs, reward, terminated, truncated, _ = env.step(action)
+            obs, reward, terminated, truncated, info = env.step(action)
             returns[i] += float(reward)
             done = terminated or truncated
+            for key in ("success", "is_success"):
+                if key in info:
+                    success = bool(success) or bool(info[key])
+        successes.append(success)
     return returns
 
 
 def evaluation_scores(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool = True) -> dict[str, Any]:
     """The CSV columns of one evaluation of a cell's model (the resets of seed ``seed``'s protocol)."""
-    returns = evaluate(model, env, n_episodes, seed=10_000 * (seed + 1), deterministic=deterministic)
+    successes: list[bool | None] = []
+    returns = evaluate(model, env, n_episodes, seed=10_000 * (seed + 1), deterministic=deterministic, successes=successes)
     scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
+    reported = [float(s) for s in successes if s is not None]
     return {
         "score": round(float(np.mean(scores)), 3),
         "score_std": round(float(np.std(scores)), 3),
         "mean_return": round(float(np.mean(returns)), 2),
         "eval_episodes": n_episodes,
+        "success": round(float(np.mean(reported)), 3) if reported else math.nan,
     }
 
 
@@ -317,8 +332,9 @@ def read_rows(csv_path: pathlib.Path) -> list[dict[str, Any]]:
                 int(row["step"]),
                 int(row["eval_episodes"]),
             )
-            for key in ("score", "score_std", "mean_return", "wall_s"):
-                parsed[key] = float(row[key]) if row[key] not in ("", "None") else math.nan
+            for key in ("score", "score_std", "mean_return", "wall_s", "success"):
+                value = row.get(key)  # success: absent in files written before it was a column
+                parsed[key] = float(value) if value not in (None, "", "None") else math.nan
             rows.append(parsed)
     return rows
 
@@ -329,17 +345,25 @@ def write_rows(csv_path: pathlib.Path, rows: list[dict[str, Any]]) -> None:
     with tmp.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
         writer.writeheader()
-        writer.writerows({k: row[k] for k in CSV_FIELDS} for row in rows)
+        writer.writerows({k: row.get(k, math.nan) for k in CSV_FIELDS} for row in rows)
     tmp.replace(csv_path)
 
 
+def _csv_header(csv_path: pathlib.Path) -> list[str]:
+    with csv_path.open(newline="") as f:
+        return next(csv.reader(f), [])
+
+
 def append_row(csv_path: pathlib.Path, row: dict[str, Any]) -> None:
+    """Append one row to ``scores.csv`` (first rewriting a file from before the ``success`` column with it)."""
+    if csv_path.exists() and _csv_header(csv_path) != CSV_FIELDS:
+        write_rows(csv_path, read_rows(csv_path))
     new = not csv_path.exists()
     with csv_path.open("a", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
         if new:
             writer.writeheader()
-        writer.writerow({k: row[k] for k in CSV_FIELDS})
+        writer.writerow({k: row.get(k, math.nan) for k in CSV_FIELDS})
         f.flush()
 
 
@@ -591,6 +615,13 @@ def reevaluate(out: pathlib.Path, rules: list[str], episodes: int, device: str, 
                 "step": model.num_timesteps,
                 **evaluation_scores(model, env, episodes, seed, deterministic=deterministic),
             }
+            if csv_path.exists() and _csv_header(csv_path) != REEVAL_FIELDS:  # a file from before the success column
+                with csv_path.open(newline="") as f:
+                    old_rows = list(csv.DictReader(f))
+                with csv_path.open("w", newline="") as f:
+                    writer = csv.DictWriter(f, fieldnames=REEVAL_FIELDS, restval="nan")
+                    writer.writeheader()
+                    writer.writerows(old_rows)
             new = not csv_path.exists()
             with csv_path.open("a", newline="") as f:
                 writer = csv.DictWriter(f, fieldnames=REEVAL_FIELDS)
@@ -603,12 +634,20 @@ def reevaluate(out: pathlib.Path, rules: list[str], episodes: int, device: str, 
     with csv_path.open(newline="") as f:
         rows: list[dict[str, Any]] = [dict(r) for r in csv.DictReader(f)]
     by_key: dict[tuple[str, str, str], list[float]] = defaultdict(list)
+    success_by_key: dict[tuple[str, str, str], list[float]] = defaultdict(list)
     for r in rows:
         by_key[(r["dataset"], r["variant"], r["rule"])].append(float(r["score"]))
-    lines = ["| dataset | variant | rule | score | seeds |", "|---|---|---|---|---|"]
+        success_by_key[(r["dataset"], r["variant"], r["rule"])].append(float(r.get("success") or "nan"))
+    with_success = any(not math.isnan(v) for values in success_by_key.values() for v in values)
+    head = "| dataset | variant | rule | score | seeds |" + (" success rate | seeds |" if with_success else "")
+    lines = [head, "|---|---|---|---|---|" + ("---|---|" if with_success else "")]
     for (dataset, variant, rule), values in sorted(by_key.items()):
         per_seed = ", ".join(f"{v:.1f}" for v in values)
-        lines.append(f"| {dataset} | {variant} | {rule} | {_fmt(values)} | {per_seed} |")
+        line = f"| {dataset} | {variant} | {rule} | {_fmt(values)} | {per_seed} |"
+        if with_success:
+            rates = success_by_key[(dataset, variant, rule)]
+            line += f" {_fmt_rate(rates)} | {', '.join(f'{v:.2f}' for v in rates)} |"
+        lines.append(line)
     (out / "reeval.md").write_text("\n".join(lines) + "\n")
     return rows
 
@@ -627,6 +666,15 @@ PEER_STYLES: dict[str, tuple[str, str]] = {
 def is_peer(variant: str) -> bool:
     """Whether a variant is a d3rlpy baseline (``d3rlpy-*``, from ``peers.csv``)."""
     return variant.startswith("d3rlpy-")
+
+
+def _fmt_rate(values: list[float]) -> str:
+    values = [v for v in values if not math.isnan(v)]
+    if not values:
+        return "-"
+    if len(values) == 1:
+        return f"{values[0]:.2f}"
+    return f"{np.mean(values):.2f} ± {np.std(values, ddof=1):.2f}"
 
 
 def _fmt(values: list[float]) -> str:
@@ -649,8 +697,11 @@ def summarize(rows: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any
     out: dict[tuple[str, str], dict[str, Any]] = {}
     for (dataset, variant, seed), cell in sorted(by_cell.items()):
         cell.sort(key=lambda r: r["step"])
-        entry = out.setdefault((dataset, variant), {"final": [], "best": [], "steps": [], "seeds": [], "wall_s": []})
+        entry = out.setdefault(
+            (dataset, variant), {"final": [], "best": [], "steps": [], "seeds": [], "wall_s": [], "success": []}
+        )
         entry["final"].append(cell[-1]["score"])
+        entry["success"].append(cell[-1].get("success", math.nan))
         entry["best"].append(max(r["score"] for r in cell))
         entry["steps"].append(cell[-1]["step"])
         entry["seeds"].append(seed)
@@ -706,8 +757,14 @@ def markdown_table(
         )
         lines.append(text)
         lines.append("")
-    lines.append("| dataset | variant | final | best | seeds | steps | wall s / run | dataset mean | paper POLA (D4RL v2) |")
-    lines.append("|---|---|---|---|---|---|---|---|---|")
+    # goal-reaching envs (mazes) report success: a column of the final evaluations' success rates
+    with_success = any(not math.isnan(v) for entry in summary.values() for v in entry["success"])
+    success_head, success_rule = (" final success rate |", "---|") if with_success else ("", "")
+    lines.append(
+        "| dataset | variant | final | best | seeds | steps | wall s / run | dataset mean | paper POLA (D4RL v2) |"
+        + success_head
+    )
+    lines.append("|---|---|---|---|---|---|---|---|---|" + success_rule)
     datasets = list(dict.fromkeys(r["dataset"] for r in rows))
     for dataset in datasets:
         task = paper_task(dataset)
@@ -726,12 +783,13 @@ def markdown_table(
             wall = f"{np.mean(entry['wall_s']):.0f}"
             lines.append(
                 f"| {dataset} | {variant} | {_fmt(entry['final'])} | {_fmt(entry['best'])} | {seeds} | {steps} | {wall} "
-                f"| {data_text} | {paper} |"
+                f"| {data_text} | {paper} |" + (f" {_fmt_rate(entry['success'])} |" if with_success else "")
             )
     lines.append("")
     lines.append(
         "final: score of the last evaluation; best: best evaluation of each run; mean ± sample std over seeds "
         "(a single number: one seed). Scores are D4RL-normalised (100 = the dataset's reference expert)."
+        + (" Success rate: the fraction of the final evaluation's episodes that reached the goal." if with_success else "")
     )
     return "\n".join(lines) + "\n"
 
