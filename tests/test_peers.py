@@ -9,6 +9,7 @@ from __future__ import annotations
 import ast
 import csv
 import json
+import math
 import pathlib
 import sys
 
@@ -220,6 +221,30 @@ def test_worker_drop_rows(tmp_path: pathlib.Path) -> None:
     assert worker.drop_rows(path, "d", "d3rlpy-BC", 0, after_step=100) == 2
     assert [(r["seed"], r["step"]) for r in score.read_rows(path)] == [(0, 100), (1, 100)]
     assert worker.drop_rows(path, "d", "d3rlpy-BC", 0) == 1
+
+
+def test_worker_upgrades_a_csv_from_before_the_success_column(tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "p.csv"
+    old = [f for f in worker.CSV_FIELDS if f != "success"]
+    path.write_text(",".join(old) + "\nd,d3rlpy-BC,0,100,1.0,0.0,0.0,1,1.0\n")
+    worker.append_row(
+        path,
+        dict(
+            dataset="d",
+            variant="d3rlpy-BC",
+            seed=0,
+            step=200,
+            score=2.0,
+            score_std=0.0,
+            mean_return=0.0,
+            eval_episodes=1,
+            wall_s=2.0,
+            success=0.5,
+        ),
+    )
+    rows = score.read_rows(path)
+    assert [(r["step"], r["score"]) for r in rows] == [(100, 1.0), (200, 2.0)]
+    assert math.isnan(rows[0]["success"]) and rows[1]["success"] == 0.5
 
 
 # ----------------------------------------------------------------------------------------- table merge

@@ -58,7 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"--ray:      {ray:.1f} s", flush=True)
 
     def scores(folder: str) -> list[tuple]:
-        return [tuple(r[k] for k in score.CSV_FIELDS if k != "wall_s") for r in score.read_rows(out / folder / "scores.csv")]
+        rows = score.read_rows(out / folder / "scores.csv")
+        return [tuple(str(r[k]) for k in score.CSV_FIELDS if k != "wall_s") for r in rows]  # str: NaN equals NaN
 
     print(f"ratio sequential / ray: {sequential / ray:.2f}")
     print(f"scores equal: {scores('sequential') == scores('ray')} ({len(scores('ray'))} rows)")

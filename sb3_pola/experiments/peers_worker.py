@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 # must match sb3_pola.experiments.score.CSV_FIELDS (a test checks it)
-CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s"]
+CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s", "success"]
 VARIANT_NAMES = {"td3bc": "d3rlpy-TD3+BC", "iql": "d3rlpy-IQL", "bc": "d3rlpy-BC"}
 # the npz arrays of one transition each
 TRANSITION_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")
@@ -273,17 +273,36 @@ def unscale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.
     return low + 0.5 * (np.clip(action, -1.0, 1.0) + 1.0) * (high - low)
 
 
-def evaluate(algo: Any, env: Any, n_episodes: int, seed: int, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Returns of ``n_episodes`` deterministic episodes; episode ``i`` is reset with ``seed + i`` (score's protocol)."""
+def evaluate(
+    algo: Any,
+    env: Any,
+    n_episodes: int,
+    seed: int,
+    low: np.ndarray,
+    high: np.ndarray,
+    successes: list[bool | None] | None = None,
+) -> np.ndarray:
+    """Returns of ``n_episodes`` deterministic episodes; episode ``i`` is reset with ``seed + i`` (score's protocol).
+
+    ``successes`` (a list) receives per episode whether a step's ``info["success"]`` / ``info["is_success"]`` was
+    true, or ``None`` when the env reports none (as score's ``evaluate``).
+    """
     returns = np.zeros(n_episodes)
     for i in range(n_episodes):
         obs, _ = env.reset(seed=seed + i)
-        done = False
+        done, success = False, None
         while not done:
             action = algo.predict(np.asarray(obs, dtype=np.float32)[None])[0]
-            obs, reward, terminated, truncated, _ = env.step(unscale_action(action, low, high).astype(env.action_space.dtype))
+            obs, reward, terminated, truncated, info = env.step(
+                unscale_action(action, low, high).astype(env.action_space.dtype)
+            )
             returns[i] += float(reward)
             done = bool(terminated or truncated)
+            for key in ("success", "is_success"):
+                if key in info:
+                    success = bool(success) or bool(info[key])
+        if successes is not None:
+            successes.append(success)
     return returns
 
 
@@ -305,8 +324,10 @@ def eval_row(
     algo: Any, env: Any, meta: dict[str, Any], dataset_id: str, variant: str, seed: int, step: int, episodes: int
 ) -> dict[str, Any]:
     """One evaluation as a CSV row (``wall_s`` left to the caller): reset seeds ``10_000 * (seed + 1) + i``, as score's."""
-    returns = evaluate(algo, env, episodes, 10_000 * (seed + 1), meta["action_low"], meta["action_high"])
+    successes: list[bool | None] = []
+    returns = evaluate(algo, env, episodes, 10_000 * (seed + 1), meta["action_low"], meta["action_high"], successes)
     scores = normalized_scores(returns, meta.get("ref_min_score"), meta.get("ref_max_score"))
+    reported = [float(s) for s in successes if s is not None]
     return {
         "dataset": dataset_id,
         "variant": variant,
@@ -316,6 +337,7 @@ def eval_row(
         "score_std": round(float(np.std(scores)), 3),
         "mean_return": round(float(np.mean(returns)), 2),
         "eval_episodes": episodes,
+        "success": round(float(np.mean(reported)), 3) if reported else float("nan"),
     }
 
 
@@ -335,18 +357,28 @@ def drop_rows(csv_path: pathlib.Path, dataset: str, variant: str, seed: int, aft
         with tmp.open("w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
             writer.writeheader()
-            writer.writerows({k: r[k] for k in CSV_FIELDS} for r in kept)
+            writer.writerows({k: r.get(k) or "nan" for k in CSV_FIELDS} for r in kept)  # success: new column
         tmp.replace(csv_path)
     return len(rows) - len(kept)
 
 
 def append_row(csv_path: pathlib.Path, row: dict[str, Any]) -> None:
+    if csv_path.exists() and csv_path.stat().st_size > 0:
+        with csv_path.open(newline="") as f:
+            header = next(csv.reader(f), [])
+        if header != CSV_FIELDS:  # a file from before the success column: rewrite it with the column
+            with csv_path.open(newline="") as f:
+                rows = list(csv.DictReader(f))
+            with csv_path.open("w", newline="") as f:
+                writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+                writer.writeheader()
+                writer.writerows({k: r.get(k) or "nan" for k in CSV_FIELDS} for r in rows)
     new = not csv_path.exists() or csv_path.stat().st_size == 0
     with csv_path.open("a", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
         if new:
             writer.writeheader()
-        writer.writerow({k: row[k] for k in CSV_FIELDS})
+        writer.writerow({k: row.get(k, "nan") for k in CSV_FIELDS})
         f.flush()
 
 
