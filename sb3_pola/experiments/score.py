@@ -15,6 +15,11 @@ dataset's env (D4RL-normalised score from the dataset's reference scores). Outpu
   of the SB3 logger, ``train/*`` every ``--log-interval`` steps, as CSV: one file per segment of a
   resumed run).
 
+``--out`` is a folder, or an fsspec URL (``s3://bucket/run`` with s3fs installed, ``file:///nfs/run``, ...):
+each cell then works in a local scratch folder synchronised with the storage and writes its rows to
+``rows/<cell>.csv``, merged into ``scores.csv`` by the driver (:func:`run_stored_cell`,
+:mod:`sb3_pola.experiments.storage`).
+
 ``--reevaluate RULE ...`` evaluates the saved final models again under other evaluation rules
 (``ema``, ``online``, ``stochastic``: one sample of the noisy reverse chain, ``candidates<N>``: N noisy
 candidates ranked by the critic, as Diffusion-QL evaluates) and writes ``reeval.csv`` and ``reeval.md``.
@@ -928,19 +933,26 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
     return written
 
 
-def write_reports(out: pathlib.Path, variants: list[str], config: dict[str, Any] | None = None) -> None:
-    """``table.md`` and the figures from ``scores.csv``, with the d3rlpy baselines of ``peers.csv`` when it exists."""
+def write_reports(out: pathlib.Path, variants: list[str], config: dict[str, Any] | None = None, shown: str = "") -> None:
+    """``table.md`` and the figures from ``scores.csv``, with the d3rlpy baselines of ``peers.csv`` when it exists.
+
+    :param out: output folder
+    :param variants: the variants of the table, in order
+    :param config: the content of ``config.json``
+    :param shown: how the output is named in messages (default: the folder)
+    """
+    shown = (shown or str(out)).rstrip("/")
     rows = read_rows(out / "scores.csv")
     peer_rows = [r for r in read_rows(out / "peers.csv") if is_peer(r["variant"])]
     if not rows and not peer_rows:
-        print(f"[score] no evaluations in {out / 'scores.csv'} yet")
+        print(f"[score] no evaluations in {shown}/scores.csv yet")
         return
     peers_path = out / "peers_config.json"
     peers_config = json.loads(peers_path.read_text()) if peer_rows and peers_path.exists() else None
     rows = rows + peer_rows
     (out / "table.md").write_text(markdown_table(rows, variants, config, peers_config))
     paths = plot_curves(rows, out)
-    print(f"[score] wrote {out / 'table.md'}" + "".join(f", {p.name}" for p in paths))
+    print(f"[score] wrote {shown}/table.md" + "".join(f", {p.name}" for p in paths))
 
 
 def publish_reports(view: Workspace, variants: list[str], config: dict[str, Any] | None = None) -> None:
@@ -952,7 +964,7 @@ def publish_reports(view: Workspace, variants: list[str], config: dict[str, Any]
     """
     view.pull("scores.csv", "peers.csv", "peers_config.json")
     view.pull_tree("train")
-    write_reports(view.folder, variants, config)
+    write_reports(view.folder, variants, config, shown=view.shown())
     write_diagnostics(view.folder)
     view.push("table.md", "diagnostics.md", *sorted(view.folder.glob("fig_*.png")))
 
@@ -1002,7 +1014,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--device", default="auto", help="cpu, cuda, cuda:1 or auto")
     parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
-    parser.add_argument("--out", default="results/score", help="output folder")
+    parser.add_argument(
+        "--out", default="results/score", help="output folder, or an fsspec URL (s3://bucket/run with s3fs installed, ...)"
+    )
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--log-interval", type=int, help="gradient steps between rows of the training statistics")
     parser.add_argument(
@@ -1125,7 +1139,7 @@ def _reevaluate_in(view: Workspace, args: argparse.Namespace, device: str) -> in
     view.pull_tree("models")
     reevaluate(view.folder, args.reevaluate, episodes, device, verbose=args.verbose)
     view.push("reeval.csv", "reeval.md")
-    print(f"[score] wrote {view.folder / 'reeval.md' if view.storage is None else args.out.rstrip('/') + '/reeval.md'}")
+    print(f"[score] wrote {view.shown('reeval.md')}")
     return 0
 
 

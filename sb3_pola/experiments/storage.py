@@ -110,8 +110,15 @@ class Workspace:
     def __init__(self, folder: pathlib.Path, storage: Storage | None = None) -> None:
         self.folder = folder
         self.storage = storage
-        # (mtime, size) of every file as last pulled or pushed: what a push need not upload again
-        self._synced: dict[str, tuple[int, int]] = {}
+        # (inode, mtime, size) of every file as last pulled or pushed: what a push need not upload again (the
+        # inode changes at every atomic rewrite, which a coarse mtime of an equal-sized checkpoint would miss)
+        self._synced: dict[str, tuple[int, int, int]] = {}
+
+    def shown(self, rel: str = "") -> str:
+        """How a file of the storage is named in messages: its path, or its URL."""
+        if self.storage is None:
+            return str(self.folder / rel)
+        return f"{self.storage.url.rstrip('/')}/{rel}" if rel else self.storage.url
 
     @property
     def location(self) -> str:
@@ -123,12 +130,12 @@ class Workspace:
             path = path.relative_to(self.folder)
         return pathlib.PurePath(path).as_posix()
 
-    def _stat(self, rel: str) -> tuple[int, int] | None:
+    def _stat(self, rel: str) -> tuple[int, int, int] | None:
         try:
             stat = (self.folder / rel).stat()
         except FileNotFoundError:
             return None
-        return stat.st_mtime_ns, stat.st_size
+        return stat.st_ino, stat.st_mtime_ns, stat.st_size
 
     def exists(self, path: str | pathlib.Path) -> bool:
         """Whether the file exists in the storage."""
@@ -141,7 +148,7 @@ class Workspace:
             return
         for rel in map(self._rel, paths):
             if self.storage.get(rel, self.folder / rel):
-                self._synced[rel] = self._stat(rel) or (0, 0)
+                self._synced[rel] = self._stat(rel) or (0, 0, 0)
 
     def pull_tree(self, path: str | pathlib.Path) -> None:
         """Download every file under a folder of the storage."""
