@@ -105,10 +105,13 @@ def test_workspace_pushes_what_changed(memory_url: str, tmp_path: pathlib.Path, 
     view.push("rows/a.csv", "rows/missing.csv")
     view.push(view.folder / "rows" / "a.csv")  # unchanged: not uploaded again
     assert uploads == ["rows/a.csv"] and view.exists("rows/a.csv")
+    (view.folder / "rows" / "a.csv").write_text("b")  # rewritten in place, same size (maybe the same mtime)
+    view.push("rows/a.csv")
+    assert uploads == ["rows/a.csv"] * 2
     other = Workspace(tmp_path / "other", storage)
     other.pull_tree("rows")
     other.push_tree("rows")  # just pulled: nothing to upload
-    assert (other.folder / "rows" / "a.csv").read_text() == "a" and uploads == ["rows/a.csv"]
+    assert (other.folder / "rows" / "a.csv").read_text() == "b" and uploads == ["rows/a.csv"] * 2
     with open_workspace(memory_url) as scratch:
         assert scratch.storage is not None and scratch.location == memory_url and scratch.folder.is_dir()
     assert not scratch.folder.exists()  # the scratch folder is deleted
@@ -116,6 +119,12 @@ def test_workspace_pushes_what_changed(memory_url: str, tmp_path: pathlib.Path, 
         assert local.storage is None and local.folder == tmp_path / "plain" and local.folder.is_dir()
         local.pull("a.csv")
         assert not (local.folder / "a.csv").exists()
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "plain" / "cells").mkdir()
+    (tmp_path / "plain" / "cells" / "x.json").write_text("{}")
+    with open_workspace("plain") as relative:  # paths inside a folder given relative to the working directory
+        assert relative.exists(relative.folder / "cells" / "x.json") and relative.exists("cells/x.json")
+        assert not relative.exists(relative.folder / "cells" / "y.json")
 
 
 def test_out_url_needs_its_backend(capsys: pytest.CaptureFixture) -> None:

@@ -12,6 +12,7 @@ resume from the storage is as exact as a resume from a folder.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import pathlib
 import shutil
@@ -100,8 +101,8 @@ class Storage:
 class Workspace:
     """A local folder to work in, standing for a storage: the storage itself, or a scratch copy of part of it.
 
-    Paths are relative to the folder (``"ckpt/a.zip"``) or absolute paths inside it. Without a storage every
-    method but :meth:`exists` and :meth:`remove` does nothing: the folder is the storage.
+    Files are named by a string relative to the folder (``"ckpt/a.zip"``) or a ``pathlib.Path`` inside it.
+    Without a storage every method but :meth:`exists` and :meth:`remove` does nothing: the folder is the storage.
 
     :param folder: the local folder
     :param storage: the storage it stands for (``None``: the folder itself)
@@ -110,9 +111,9 @@ class Workspace:
     def __init__(self, folder: pathlib.Path, storage: Storage | None = None) -> None:
         self.folder = folder
         self.storage = storage
-        # (inode, mtime, size) of every file as last pulled or pushed: what a push need not upload again (the
-        # inode changes at every atomic rewrite, which a coarse mtime of an equal-sized checkpoint would miss)
-        self._synced: dict[str, tuple[int, int, int]] = {}
+        # digest of every file as last pulled or pushed: what a push need not upload again (a content digest, as
+        # a file rewritten in place within one tick of the clock keeps its mtime, and often its size)
+        self._synced: dict[str, bytes] = {}
 
     def shown(self, rel: str = "") -> str:
         """How a file of the storage is named in messages: its path, or its URL."""
@@ -126,16 +127,19 @@ class Workspace:
         return self.storage.url if self.storage is not None else str(self.folder.resolve())
 
     def _rel(self, path: str | pathlib.Path) -> str:
-        if isinstance(path, pathlib.Path) and path.is_absolute():
+        if isinstance(path, pathlib.Path):  # a path inside the folder (relative if the folder's path is)
             path = path.relative_to(self.folder)
         return pathlib.PurePath(path).as_posix()
 
-    def _stat(self, rel: str) -> tuple[int, int, int] | None:
+    def _digest(self, rel: str) -> bytes | None:
+        digest = hashlib.blake2b()
         try:
-            stat = (self.folder / rel).stat()
+            with (self.folder / rel).open("rb") as file:
+                while chunk := file.read(1 << 20):
+                    digest.update(chunk)
         except FileNotFoundError:
             return None
-        return stat.st_ino, stat.st_mtime_ns, stat.st_size
+        return digest.digest()
 
     def exists(self, path: str | pathlib.Path) -> bool:
         """Whether the file exists in the storage."""
@@ -148,7 +152,7 @@ class Workspace:
             return
         for rel in map(self._rel, paths):
             if self.storage.get(rel, self.folder / rel):
-                self._synced[rel] = self._stat(rel) or (0, 0, 0)
+                self._synced[rel] = self._digest(rel) or b""
 
     def pull_tree(self, path: str | pathlib.Path) -> None:
         """Download every file under a folder of the storage."""
@@ -160,10 +164,10 @@ class Workspace:
         if self.storage is None:
             return
         for rel in map(self._rel, paths):
-            stat = self._stat(rel)
-            if stat is not None and stat != self._synced.get(rel):
+            digest = self._digest(rel)
+            if digest is not None and digest != self._synced.get(rel):
                 self.storage.put(self.folder / rel, rel)
-                self._synced[rel] = stat
+                self._synced[rel] = digest
 
     def push_tree(self, path: str | pathlib.Path, pattern: str = "*") -> None:
         """Upload the changed files under a local folder (those matching ``pattern``, recursively)."""
