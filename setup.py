@@ -34,6 +34,8 @@ setup(
         "matplotlib",
         "tqdm",
         "rich",
+        # sb3-pola score --out s3://... (with or without Ray); torch requires it already
+        "fsspec",
     ],
     extras_require={
         "zoo": ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"],

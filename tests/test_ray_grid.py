@@ -108,6 +108,24 @@ def autogroup_nice(value: int | None) -> int | None:
     return previous
 
 
+@pytest.fixture(scope="module")
+def sequential(data_root: pathlib.Path, local_ray: pathlib.Path, tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+    """The sequential run of the grid (while the Ray workers warm up), the reference of the Ray runs."""
+    out = tmp_path_factory.mktemp("sequential") / "out"
+    assert score.main([*TINY, "--data-dir", str(data_root), "--out", str(out)]) == 0
+    return out
+
+
+def same_models(expected: pathlib.Path, models: pathlib.Path) -> None:
+    """The final models of ``models`` are those of ``expected``, bit for bit."""
+    names = sorted(p.name for p in expected.iterdir())
+    assert sorted(p.name for p in models.iterdir()) == names
+    for name in names:
+        expected_state = POLA.load(expected / name, device="cpu").policy.state_dict()
+        state = POLA.load(models / name, device="cpu").policy.state_dict()
+        assert all(th.equal(state[key], value) for key, value in expected_state.items()), name
+
+
 def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
     """Rows without their wall-clock time."""
     return [tuple(str(r[k]) for k in score.CSV_FIELDS if k != "wall_s") for r in rows]  # str: NaN success equals NaN
@@ -117,10 +135,13 @@ def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
 # and it once needed more than the suite's 600 s, hence its own timeout
 @pytest.mark.timeout(1500)
 def test_ray_grid_equals_sequential_and_recovers(
-    data_root: pathlib.Path, local_ray: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture
+    data_root: pathlib.Path,
+    local_ray: pathlib.Path,
+    sequential: pathlib.Path,
+    tmp_path: pathlib.Path,
+    capsys: pytest.CaptureFixture,
 ) -> None:
-    sequential, distributed = tmp_path / "sequential", tmp_path / "ray"
-    assert score.main([*TINY, "--data-dir", str(data_root), "--out", str(sequential)]) == 0
+    distributed = tmp_path / "ray"
     expected = score.read_rows(sequential / "scores.csv")
     assert len(expected) == 8  # 2 datasets x 2 variants x evaluations at steps 10 and 20
 
@@ -149,13 +170,36 @@ def test_ray_grid_equals_sequential_and_recovers(
     assert comparable(score.read_rows(distributed / "scores.csv")) == comparable(expected)
     assert "| test/pendulum2-v0 | T1 |" in (distributed / "table.md").read_text()
     assert (distributed / "fig_rollout_test_pendulum2-v0.png").exists()
-    names = sorted(p.name for p in (sequential / "models").iterdir())
-    assert sorted(p.name for p in (distributed / "models").iterdir()) == names
-    for name in names:  # the final models are those of the sequential run, bit for bit
-        expected_state = POLA.load(sequential / "models" / name, device="cpu").policy.state_dict()
-        state = POLA.load(distributed / "models" / name, device="cpu").policy.state_dict()
-        assert all(th.equal(state[key], value) for key, value in expected_state.items()), name
+    same_models(sequential / "models", distributed / "models")
     assert not list((distributed / "ckpt").glob("*.zip"))
+
+
+@pytest.mark.timeout(1500)
+def test_ray_grid_into_a_url(
+    data_root: pathlib.Path, local_ray: pathlib.Path, sequential: pathlib.Path, tmp_path: pathlib.Path
+) -> None:
+    """--out file://...: every worker in its own scratch folder; a worker killed mid-cell is retried from the storage."""
+    from sb3_pola.experiments.storage import Storage
+
+    url = (tmp_path / "store").as_uri()
+    killed = score.cell_name(DATASETS[0], "T1", 0)
+    local_ray.write_text(json.dumps({killed: {"step": 20, "action": "kill"}}))  # once: the retry goes through
+    grid = ["--datasets", DATASETS[0], "--max-retries", "1"]
+    assert score.main([*TINY, "--data-dir", str(data_root), "--out", url, "--ray", *grid]) == 0
+    assert json.loads(local_ray.read_text()) == {}  # the worker did die (the fault is dropped just before)
+    storage = Storage(url)
+    local = tmp_path / "local"
+    for rel in storage.list(""):
+        assert storage.get(rel, local / rel)
+    expected = [r for r in score.read_rows(sequential / "scores.csv") if r["dataset"] == DATASETS[0]]
+    assert comparable(score.read_rows(local / "scores.csv")) == comparable(expected)
+    assert (local / "train" / killed / "progress_from10.csv").exists()  # the retry continued from the step-10 checkpoint
+    assert not storage.list("ckpt") and len(storage.list("cells")) == 2 and (local / "table.md").exists()
+    expected_models = tmp_path / "expected"
+    expected_models.mkdir()
+    for path in (sequential / "models").glob(f"{score.slug(DATASETS[0])}__*.zip"):
+        (expected_models / path.name).write_bytes(path.read_bytes())
+    same_models(expected_models, local / "models")
 
 
 def test_a_cell_task_after_its_dynamics_fit_is_the_sequential_cell(
@@ -195,11 +239,6 @@ def test_missing_ray_says_which_extra(
     err = capsys.readouterr().err
     assert 'sb3-pola score needs the "ray" extra: pip install "sb3_pola[ray]"' in err and "Traceback" not in err
     assert not (tmp_path / "out" / "scores.csv").exists()
-
-
-def test_out_must_be_a_folder(capsys: pytest.CaptureFixture) -> None:
-    assert score.main(["--out", "s3://bucket/score", "--ray"]) == 2
-    assert "a folder path is needed" in capsys.readouterr().err
 
 
 def test_dynamics_fits_follow_the_sequential_order(tmp_path: pathlib.Path) -> None:

@@ -1,7 +1,9 @@
 """``sb3-pola score --ray``: the score grid's (dataset, variant, seed) cells as Ray tasks, on one machine or a cluster.
 
-Every cell is one task running :func:`~sb3_pola.experiments.score.run_cell` against the output folder,
-which every worker must see (a shared folder on a cluster). A dynamics model shared by several cells is
+Every cell is one task running :func:`~sb3_pola.experiments.score.run_stored_cell` against the output,
+which every worker must see: a shared folder, or an fsspec URL (``s3://bucket/run`` with s3fs installed;
+each task then works in a local scratch folder, pulling its files first and pushing them at every checkpoint,
+:mod:`sb3_pola.experiments.storage`). A dynamics model shared by several cells is
 fitted first by a task of the cell that fits it in the sequential run: it stops after its first gradient
 step with a checkpoint, then every cell sharing the model starts, that one continuing from its checkpoint.
 On CPU the scores are therefore those of the sequential run.
@@ -22,11 +24,13 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sb3_pola.cli import missing_extra_message
 from sb3_pola.experiments import score
-from sb3_pola.experiments.diagnostics import write_diagnostics
+
+if TYPE_CHECKING:
+    from sb3_pola.experiments.storage import Workspace
 
 MISSING_RAY = missing_extra_message("score", "ray") + " (for --ray)"
 # seconds between two merges of the cells' rows into scores.csv, and between two rewrites of the reports (the
@@ -39,7 +43,7 @@ Cell = tuple[str, str, int]
 
 def rows_path(out: pathlib.Path, cell: Cell) -> pathlib.Path:
     """The file of a cell's evaluation rows (``rows/<cell>.csv``), merged into ``scores.csv`` by the driver."""
-    return out / "rows" / f"{score.cell_name(*cell)}.csv"
+    return out / score.rows_rel(*cell)
 
 
 def marker_path(out: pathlib.Path, cell: Cell) -> pathlib.Path:
@@ -95,18 +99,35 @@ def collect_rows(out: pathlib.Path, cells: list[Cell]) -> list[dict[str, Any]]:
     return merged
 
 
-def plan_dynamics_fits(cells: list[Cell], config: score.Config, out: pathlib.Path) -> dict[pathlib.Path, Cell]:
+def merge_rows(view: Workspace, cells: list[Cell]) -> list[dict[str, Any]]:
+    """:func:`collect_rows` in a workspace: ``scores.csv`` and the rows files pulled, the merged ``scores.csv`` pushed.
+
+    :param view: the workspace of the output
+    :param cells: the grid's cells, in the sequential run's order
+    :return: the rows written
+    """
+    view.pull("scores.csv")
+    view.pull_tree("rows")
+    merged = collect_rows(view.folder, cells)
+    view.push("scores.csv")
+    return merged
+
+
+def plan_dynamics_fits(
+    cells: list[Cell], config: score.Config, out: pathlib.Path, exists: Callable[[pathlib.Path], bool] = pathlib.Path.exists
+) -> dict[pathlib.Path, Cell]:
     """For each dynamics model still to fit, the cell fitting it in the sequential run: the first one needing it.
 
     :param cells: the cells to run, in the sequential run's order
     :param config: the grid's configuration
     :param out: output folder
+    :param exists: whether a file under ``out`` exists (in the storage: :meth:`Workspace.exists`)
     :return: dynamics model path -> cell
     """
     fits: dict[pathlib.Path, Cell] = {}
     for cell in cells:
         path = score.dynamics_path(out, cell[0], cell[2], config)
-        if score.needs_dynamics(cell[1], config) and not path.exists() and path not in fits:
+        if score.needs_dynamics(cell[1], config) and not exists(path) and path not in fits:
             fits[path] = cell
     return fits
 
@@ -122,11 +143,11 @@ def cell_task(
     environ: dict[str, str],
     *after: Any,
 ) -> bool:
-    """One cell on a Ray worker: :func:`~sb3_pola.experiments.score.run_cell` writing its rows to ``rows/``.
+    """One cell on a Ray worker: :func:`~sb3_pola.experiments.score.run_stored_cell` writing its rows to ``rows/``.
 
     :param cell: (dataset, variant, seed)
     :param config: the grid's :class:`~sb3_pola.experiments.score.Config` as a dict
-    :param out: output folder, seen by every worker
+    :param out: output folder or fsspec URL, seen by every worker
     :param device: torch device
     :param threads: torch CPU threads (a fixed count: results on CPU depend on it)
     :param verbose: 0 silent, 1 a line per evaluation
@@ -137,16 +158,14 @@ def cell_task(
     """
     import torch as th
 
+    from sb3_pola.experiments.storage import open_workspace
+
     os.environ.update(environ)
     th.set_num_threads(threads)
-    folder = pathlib.Path(out)
-    if marker_path(folder, cell).exists():  # finished by its dynamics-fit task (a one-step budget) or by a retry
-        return True
-    path = rows_path(folder, cell)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return score.run_cell(
-        *cell, score.Config(**config), folder, device, verbose, rows_csv=path, stop_after_dynamics=stop_after_dynamics
-    )
+    with open_workspace(out) as view:  # a URL: a scratch folder of this task's own
+        if view.exists(marker_path(view.folder, cell)):  # finished by its dynamics-fit task (a one-step budget) or a retry
+            return True
+        return score.run_stored_cell(view, *cell, score.Config(**config), device, verbose, stop_after_dynamics)
 
 
 def _error_text(error: BaseException) -> str:
@@ -159,19 +178,20 @@ def _error_text(error: BaseException) -> str:
 
 
 def _submit_cells(
-    submit: Callable[..., Any], todo: list[Cell], config: score.Config, out: pathlib.Path
+    submit: Callable[..., Any], todo: list[Cell], config: score.Config, view: Workspace
 ) -> tuple[dict[Any, str], int]:
     """Start the dynamics-fit tasks, then every cell, each after the fit of the dynamics model it uses.
 
     :param submit: starts a :func:`cell_task` of ``(name, cell, stop_after_dynamics, *tasks_to_wait_for)``
     :param todo: the cells to run, in the sequential run's order
     :param config: the grid's configuration
-    :param out: output folder
+    :param view: the workspace of the output
     :return: the tasks (object ref -> name), and how many of them are dynamics fits
     """
+    out = view.folder
     pending: dict[Any, str] = {}
     fits: dict[pathlib.Path, Any] = {}
-    for path, cell in plan_dynamics_fits(todo, config, out).items():
+    for path, cell in plan_dynamics_fits(todo, config, out, view.exists).items():
         name = f"{score.cell_name(*cell)} (dynamics fit)"
         fits[path] = submit(name, cell, True)
         pending[fits[path]] = name
@@ -184,13 +204,13 @@ def _submit_cells(
 
 
 def _wait_for_cells(
-    pending: dict[Any, str], cells: list[Cell], out: pathlib.Path, variants: list[str], info: dict[str, Any]
+    pending: dict[Any, str], cells: list[Cell], view: Workspace, variants: list[str], info: dict[str, Any]
 ) -> list[tuple[str, BaseException]]:
     """Wait for every task, merging the rows into ``scores.csv`` as they come and rewriting the reports now and then.
 
     :param pending: the tasks (object ref -> name); emptied
     :param cells: the grid, in the sequential run's order
-    :param out: output folder
+    :param view: the workspace of the output
     :param variants: the variants of the reports
     :param info: the content of ``config.json``
     :return: the failed tasks' names and errors
@@ -210,11 +230,10 @@ def _wait_for_cells(
                 print(f"[score] {name} failed:\n{_error_text(error)}", file=sys.stderr)
         now = time.monotonic()
         if now - last_merge >= MERGE_INTERVAL or done:
-            collect_rows(out, cells)
+            merge_rows(view, cells)
             last_merge = now
         if now - last_report >= REPORT_INTERVAL and pending:
-            score.write_reports(out, variants, info)
-            write_diagnostics(out)
+            score.publish_reports(view, variants, info)
             last_report = now
     return failures
 
@@ -224,7 +243,7 @@ def run_grid(
     cells: list[Cell],
     config: score.Config,
     info: dict[str, Any],
-    out: pathlib.Path,
+    view: Workspace,
     device: str,
 ) -> int:
     """Run the cells as Ray tasks and write the sequential run's outputs; returns the exit code.
@@ -237,7 +256,7 @@ def run_grid(
     :param cells: the grid, in the sequential run's order
     :param config: its configuration
     :param info: the content of ``config.json``
-    :param out: output folder, seen by every worker
+    :param view: the workspace of the output (a folder or an fsspec URL every worker sees)
     :param device: torch device of the cells
     :return: 0, 1 if a cell failed, 2 without Ray
     """
@@ -246,12 +265,16 @@ def run_grid(
     except ImportError:
         print(MISSING_RAY, file=sys.stderr)
         return 2
-    todo = [cell for cell in cells if not marker_path(out, cell).exists()]
+    out = view.folder
+    todo = [cell for cell in cells if not view.exists(marker_path(out, cell))]
     if args.verbose:
         for cell in cells:
             if cell not in todo:
                 print(f"[score] {score.cell_name(*cell)}: done, skipped")
+    view.pull("scores.csv")
+    view.pull_tree("rows")
     adopt_rows(out, todo)
+    view.push_tree("rows", "*.csv")
     environ = {"MINARI_DATASETS_PATH": os.environ["MINARI_DATASETS_PATH"]} if args.data_dir else {}
     threads = args.threads or max(1, int(args.cpus_per_cell))
     started = not ray.is_initialized()
@@ -262,21 +285,20 @@ def run_grid(
     try:
         remote = ray.remote(cell_task)
         resources = dict(num_cpus=args.cpus_per_cell, num_gpus=args.gpus_per_cell, max_retries=args.max_retries)
-        common = (asdict(config), str(out.resolve()), device, threads, args.verbose)
+        common = (asdict(config), view.location, device, threads, args.verbose)
 
         def submit(name: str, cell: Cell, stop_after_dynamics: bool, *after: Any) -> Any:
             return remote.options(name=name, **resources).remote(cell, *common, stop_after_dynamics, environ, *after)
 
-        pending, n_fits = _submit_cells(submit, todo, config, out)
+        pending, n_fits = _submit_cells(submit, todo, config, view)
         cpus = ray.cluster_resources().get("CPU", 0)
         print(f"[score] {len(todo)} cells on Ray ({cpus:.0f} CPUs), {n_fits} dynamics fits")
-        failures = _wait_for_cells(pending, cells, out, args.variants, info)
+        failures = _wait_for_cells(pending, cells, view, args.variants, info)
     finally:
         if started:
             ray.shutdown()
-    collect_rows(out, cells)
-    score.write_reports(out, args.variants, info)
-    write_diagnostics(out)
+    merge_rows(view, cells)
+    score.publish_reports(view, args.variants, info)
     if failures:
         print(f"[score] {len(failures)} task(s) failed: " + ", ".join(name for name, _ in failures), file=sys.stderr)
         print("[score] the same command resumes them (finished cells are skipped)", file=sys.stderr)

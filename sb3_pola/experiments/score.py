@@ -15,6 +15,11 @@ dataset's env (D4RL-normalised score from the dataset's reference scores). Outpu
   of the SB3 logger, ``train/*`` every ``--log-interval`` steps, as CSV: one file per segment of a
   resumed run).
 
+``--out`` is a folder, or an fsspec URL (``s3://bucket/run`` with s3fs installed, ``file:///nfs/run``, ...):
+each cell then works in a local scratch folder synchronised with the storage and writes its rows to
+``rows/<cell>.csv``, merged into ``scores.csv`` by the driver (:func:`run_stored_cell`,
+:mod:`sb3_pola.experiments.storage`).
+
 ``--reevaluate RULE ...`` evaluates the saved final models again under other evaluation rules
 (``ema``, ``online``, ``stochastic``: one sample of the noisy reverse chain, ``candidates<N>``: N noisy
 candidates ranked by the critic, as Diffusion-QL evaluates) and writes ``reeval.csv`` and ``reeval.md``.
@@ -41,12 +46,16 @@ import re
 import sys
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from sb3_pola.experiments.diagnostics import write_diagnostics
+
+if TYPE_CHECKING:
+    from sb3_pola.experiments.storage import Workspace
 
 # ----------------------------------------------------------------------------------------- variants
 
@@ -442,6 +451,7 @@ def run_cell(
     verbose: int = 1,
     rows_csv: pathlib.Path | None = None,
     stop_after_dynamics: bool = False,
+    on_save: Callable[[], None] = lambda: None,
 ) -> bool:
     """Train and evaluate one (dataset, variant, seed) cell, resuming from its checkpoint if there is one.
 
@@ -458,6 +468,8 @@ def run_cell(
     :param rows_csv: where this cell's evaluation rows go (``out/scores.csv`` if ``None``)
     :param stop_after_dynamics: stop (with a checkpoint) after the first gradient step once the dynamics model
         is fitted and saved, so that other cells can share it while this one continues later
+    :param on_save: called after every checkpoint (its rows are written first), e.g. to upload the cell's files
+        (:func:`run_stored_cell`)
     :return: whether the cell finished (its marker is written)
     """
     from stable_baselines3.common.callbacks import BaseCallback
@@ -521,6 +533,7 @@ def run_cell(
                 }
                 append_row(csv_path, row)
                 save_checkpoint(model, ckpt)
+                on_save()
                 if verbose:
                     print(
                         f"[score] {name} step {step}: score {row['score']:.1f} "
@@ -529,6 +542,7 @@ def run_cell(
                     sys.stdout.flush()
             elif stop_after_dynamics:
                 save_checkpoint(model, ckpt)
+                on_save()
             return not stop_after_dynamics
 
     if remaining > 0:
@@ -548,6 +562,60 @@ def run_cell(
         ckpt.replace(models / f"{name}.zip")
     marker.write_text(json.dumps(info, indent=1))
     return True
+
+
+def rows_rel(dataset: str, variant: str, seed: int) -> str:
+    """A cell's own rows file (``rows/<cell>.csv``, relative to the output), merged into ``scores.csv`` by the driver."""
+    return f"rows/{cell_name(dataset, variant, seed)}.csv"
+
+
+def run_stored_cell(
+    view: Workspace,
+    dataset: str,
+    variant: str,
+    seed: int,
+    config: Config,
+    device: str,
+    verbose: int = 1,
+    stop_after_dynamics: bool = False,
+) -> bool:
+    """:func:`run_cell` in a workspace, its rows in ``rows/<cell>.csv``: its files pulled first, pushed at every checkpoint.
+
+    With a scratch workspace (an fsspec URL) the cell pulls its checkpoint, rows, dynamics model and training
+    statistics, uploads the changed ones after every evaluation (the rows before the checkpoint, so that no
+    checkpoint is ever ahead of its rows) and at the end its final model, then its marker, then deletes its
+    checkpoint: a kill at any point leaves the storage resumable.
+
+    :param view: the workspace of the output (:func:`~sb3_pola.experiments.storage.open_workspace`)
+    :param dataset: Minari dataset id
+    :param variant: a key of :data:`VARIANTS`
+    :param seed: random seed
+    :param config: budget and hyperparameters
+    :param device: torch device
+    :param verbose: 0 silent, 1 a line per evaluation
+    :param stop_after_dynamics: see :func:`run_cell`
+    :return: whether the cell finished
+    """
+    name = cell_name(dataset, variant, seed)
+    rows, ckpt, train = rows_rel(dataset, variant, seed), f"ckpt/{name}.zip", f"train/{name}"
+    dyn = dynamics_path(view.folder, dataset, seed, config)
+    view.pull(rows, ckpt, dyn)
+    view.pull_tree(train)
+
+    def save() -> None:
+        view.push(rows, dyn, ckpt)
+        view.push_tree(train)
+
+    rows_csv = view.folder / rows
+    rows_csv.parent.mkdir(parents=True, exist_ok=True)
+    finished = run_cell(
+        dataset, variant, seed, config, view.folder, device, verbose, rows_csv, stop_after_dynamics, on_save=save
+    )
+    save()
+    if finished:
+        view.push(f"models/{name}.zip", f"cells/{name}.json")
+        view.remove(ckpt)
+    return finished
 
 
 # ----------------------------------------------------------------------------------------- re-evaluation
@@ -865,19 +933,40 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
     return written
 
 
-def write_reports(out: pathlib.Path, variants: list[str], config: dict[str, Any] | None = None) -> None:
-    """``table.md`` and the figures from ``scores.csv``, with the d3rlpy baselines of ``peers.csv`` when it exists."""
+def write_reports(out: pathlib.Path, variants: list[str], config: dict[str, Any] | None = None, shown: str = "") -> None:
+    """``table.md`` and the figures from ``scores.csv``, with the d3rlpy baselines of ``peers.csv`` when it exists.
+
+    :param out: output folder
+    :param variants: the variants of the table, in order
+    :param config: the content of ``config.json``
+    :param shown: how the output is named in messages (default: the folder)
+    """
+    shown = (shown or str(out)).rstrip("/")
     rows = read_rows(out / "scores.csv")
     peer_rows = [r for r in read_rows(out / "peers.csv") if is_peer(r["variant"])]
     if not rows and not peer_rows:
-        print(f"[score] no evaluations in {out / 'scores.csv'} yet")
+        print(f"[score] no evaluations in {shown}/scores.csv yet")
         return
     peers_path = out / "peers_config.json"
     peers_config = json.loads(peers_path.read_text()) if peer_rows and peers_path.exists() else None
     rows = rows + peer_rows
     (out / "table.md").write_text(markdown_table(rows, variants, config, peers_config))
     paths = plot_curves(rows, out)
-    print(f"[score] wrote {out / 'table.md'}" + "".join(f", {p.name}" for p in paths))
+    print(f"[score] wrote {shown}/table.md" + "".join(f", {p.name}" for p in paths))
+
+
+def publish_reports(view: Workspace, variants: list[str], config: dict[str, Any] | None = None) -> None:
+    """:func:`write_reports` and ``diagnostics.md`` in a workspace: their inputs pulled, the outputs pushed.
+
+    :param view: the workspace of the output
+    :param variants: the variants of the table, in order
+    :param config: the content of ``config.json``
+    """
+    view.pull("scores.csv", "peers.csv", "peers_config.json")
+    view.pull_tree("train")
+    write_reports(view.folder, variants, config, shown=view.shown())
+    write_diagnostics(view.folder)
+    view.push("table.md", "diagnostics.md", *sorted(view.folder.glob("fig_*.png")))
 
 
 # ----------------------------------------------------------------------------------------- command line
@@ -925,7 +1014,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--device", default="auto", help="cpu, cuda, cuda:1 or auto")
     parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
-    parser.add_argument("--out", default="results/score", help="output folder")
+    parser.add_argument(
+        "--out", default="results/score", help="output folder, or an fsspec URL (s3://bucket/run with s3fs installed, ...)"
+    )
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--log-interval", type=int, help="gradient steps between rows of the training statistics")
     parser.add_argument(
@@ -958,19 +1049,29 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     """``sb3-pola score``; returns the exit code."""
+    from sb3_pola.experiments.storage import Storage, is_url, open_workspace
+
     args = parse_args(argv)
-    if "://" in args.out:
-        print(f"[score] --out {args.out}: a folder path is needed (with --ray, one every worker sees)", file=sys.stderr)
-        return 2
-    out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    if args.data_dir:
-        os.environ["MINARI_DATASETS_PATH"] = str(pathlib.Path(args.data_dir).resolve())
+    if is_url(args.out):
+        try:
+            Storage(args.out)
+        except (ImportError, ValueError) as error:  # the URL's fsspec backend is missing, or an unknown protocol
+            print(f"[score] --out {args.out}: {error}", file=sys.stderr)
+            return 2
+    with open_workspace(args.out) as view:
+        if args.data_dir:
+            os.environ["MINARI_DATASETS_PATH"] = str(pathlib.Path(args.data_dir).resolve())
+        return _main(args, argv, view)
+
+
+def _main(args: argparse.Namespace, argv: list[str] | None, view: Workspace) -> int:
+    """``sb3-pola score`` with its output's workspace opened (:func:`main`)."""
+    out = view.folder
     config_path = out / "config.json"
+    view.pull("config.json")
     if args.report_only:
         saved = json.loads(config_path.read_text()) if config_path.exists() else None
-        write_reports(out, args.variants, saved)
-        write_diagnostics(out)
+        publish_reports(view, args.variants, saved)
         return 0
     if args.threads:
         import torch as th
@@ -979,11 +1080,7 @@ def main(argv: list[str] | None = None) -> int:
     # the cells run on the cluster's GPUs, not on the driver's
     device = "cuda" if args.ray and args.gpus_per_cell > 0 and args.device == "auto" else resolve_device(args.device)
     if args.reevaluate:
-        saved = json.loads(config_path.read_text()) if config_path.exists() else {}
-        episodes = args.eval_episodes or int(saved.get("eval_episodes", 10))
-        reevaluate(out, args.reevaluate, episodes, device, verbose=args.verbose)
-        print(f"[score] wrote {out / 'reeval.md'}")
-        return 0
+        return _reevaluate_in(view, args, device)
     config = build_config(args, device)
     cells = [(d, v, s) for s in args.seeds for d in args.datasets for v in args.variants]
     info = {
@@ -998,7 +1095,7 @@ def main(argv: list[str] | None = None) -> int:
         saved = json.loads(config_path.read_text())
         if saved.get("signature") != config.signature():
             print(
-                f"[score] {out} holds runs of another configuration (signature {saved.get('signature')}, this one "
+                f"[score] {args.out} holds runs of another configuration (signature {saved.get('signature')}, this one "
                 f"{config.signature()}): use another --out, or the same options",
                 file=sys.stderr,
             )
@@ -1006,15 +1103,18 @@ def main(argv: list[str] | None = None) -> int:
         info["started"] = saved.get("started", info["date"])
     else:
         info["started"] = info["date"]
-    print(f"[score] preset {config.preset} on {device}: {len(cells)} runs of {config.steps} steps -> {out}")
+    print(f"[score] preset {config.preset} on {device}: {len(cells)} runs of {config.steps} steps -> {args.out}")
     if args.dry_run:
         print(json.dumps(info, indent=1))
         return 0
     config_path.write_text(json.dumps(info, indent=1))
+    view.push("config.json")
     if args.ray:
         from sb3_pola.experiments.ray_grid import run_grid
 
-        return run_grid(args, cells, config, info, out, device)
+        return run_grid(args, cells, config, info, view, device)
+    if view.storage is not None:
+        return _run_stored_sequential(args, cells, config, info, view, device)
     for dataset, variant, seed in cells:
         marker = out / "cells" / f"{cell_name(dataset, variant, seed)}.json"
         if marker.exists():
@@ -1022,10 +1122,62 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"[score] {marker.stem}: done, skipped")
             continue
         run_cell(dataset, variant, seed, config, out, device, verbose=args.verbose)
-        write_reports(out, args.variants, info)
-        write_diagnostics(out)
-    write_reports(out, args.variants, info)
-    write_diagnostics(out)
+        publish_reports(view, args.variants, info)
+    publish_reports(view, args.variants, info)
+    return 0
+
+
+def _reevaluate_in(view: Workspace, args: argparse.Namespace, device: str) -> int:
+    """``--reevaluate``: the saved models and markers pulled, ``reeval.csv`` and ``reeval.md`` pushed."""
+    for rule in args.reevaluate:  # unknown rules fail before any model is downloaded
+        parse_eval_rule(rule)
+    config_path = view.folder / "config.json"
+    saved = json.loads(config_path.read_text()) if config_path.exists() else {}
+    episodes = args.eval_episodes or int(saved.get("eval_episodes", 10))
+    view.pull("reeval.csv")
+    view.pull_tree("cells")
+    view.pull_tree("models")
+    reevaluate(view.folder, args.reevaluate, episodes, device, verbose=args.verbose)
+    view.push("reeval.csv", "reeval.md")
+    print(f"[score] wrote {view.shown('reeval.md')}")
+    return 0
+
+
+def _run_stored_sequential(
+    args: argparse.Namespace,
+    cells: list[tuple[str, str, int]],
+    config: Config,
+    info: dict[str, Any],
+    view: Workspace,
+    device: str,
+) -> int:
+    """The cells one after another into an fsspec URL, as the Ray workers run them (:func:`run_stored_cell`).
+
+    Each cell works in a scratch folder of its own (deleted after it) and writes ``rows/<cell>.csv``; after every
+    cell the rows are merged into ``scores.csv`` and the reports rewritten.
+
+    :param args: the ``sb3-pola score`` arguments
+    :param cells: the grid, in order
+    :param config: its configuration
+    :param info: the content of ``config.json``
+    :param view: the driver's workspace of the output
+    :param device: torch device
+    :return: the exit code
+    """
+    from sb3_pola.experiments.ray_grid import merge_rows
+    from sb3_pola.experiments.storage import open_workspace
+
+    for cell in cells:
+        if view.exists(f"cells/{cell_name(*cell)}.json"):
+            if args.verbose:
+                print(f"[score] {cell_name(*cell)}: done, skipped")
+            continue
+        with open_workspace(view.location) as cell_view:
+            run_stored_cell(cell_view, *cell, config, device, verbose=args.verbose)
+        merge_rows(view, cells)
+        publish_reports(view, args.variants, info)
+    merge_rows(view, cells)
+    publish_reports(view, args.variants, info)
     return 0
 
 
