@@ -206,25 +206,6 @@ def light_kwargs(**overrides) -> dict:
     return kwargs
 
 
-def synthetic_dataset(n: int, obs_dim: int, act_dim: int, env_id: str | None = None, seed: int = 0):
-    """An in-memory ``OfflineDataset`` of ``n`` random transitions (no files); ``env_id`` selects the termination rule."""
-    from sb3_pola.common.datasets import OfflineDataset
-
-    rng = np.random.default_rng(seed)
-    obs = rng.standard_normal((n, obs_dim), dtype=np.float32)
-    return OfflineDataset(
-        observations=obs,
-        actions=rng.uniform(-1.0, 1.0, (n, act_dim)).astype(np.float32),
-        rewards=rng.standard_normal(n, dtype=np.float32),
-        next_observations=obs + 0.01 * rng.standard_normal((n, obs_dim), dtype=np.float32),
-        dones=(rng.random(n) < 0.001).astype(np.float32),
-        observation_space=gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32),
-        action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32),
-        dataset_id="synthetic",
-        env_id=env_id,
-    )
-
-
 def model_on_dataset(data, seed: int = 0, **kwargs):
     """A POLA model on an in-memory dataset, ready for ``_update``: buffer set up, dynamics frozen as initialised."""
     from stable_baselines3.common.logger import configure

@@ -12,12 +12,13 @@ import math
 
 import pytest
 import torch as th
-from helpers import model_on_dataset, synthetic_dataset
+from helpers import model_on_dataset
 from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
 from sb3_pola.common import activations
 from sb3_pola.common.activations import FusedMish, compiled_mish, mish_exp
+from sb3_pola.common.datasets import synthetic_dataset
 from sb3_pola.pola import fast_sampling
 from sb3_pola.pola.fast_sampling import inference_mish, sample_chain, sample_no_grad
 

@@ -7,7 +7,6 @@ from collections import Counter
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3.common.logger import configure
@@ -21,31 +20,6 @@ if TYPE_CHECKING:
 
 # (obs_dim, act_dim, Gymnasium id whose termination rule the look-ahead uses)
 TASK_SIZES: dict[str, tuple[int, int, str]] = {"hopper": (11, 3, "Hopper-v5"), "halfcheetah": (17, 6, "HalfCheetah-v5")}
-
-
-def synthetic_dataset(n: int, obs_dim: int, act_dim: int, env_id: str | None = None, seed: int = 0) -> OfflineDataset:
-    """An in-memory :class:`OfflineDataset` of ``n`` random transitions (no files, no downloads).
-
-    :param n: number of transitions
-    :param obs_dim: observation size
-    :param act_dim: action size
-    :param env_id: environment id recorded in the dataset (selects the termination rule)
-    :param seed: seed of the arrays
-    :return: the dataset
-    """
-    rng = np.random.default_rng(seed)
-    obs = rng.standard_normal((n, obs_dim), dtype=np.float32)
-    return OfflineDataset(
-        observations=obs,
-        actions=rng.uniform(-1.0, 1.0, (n, act_dim)).astype(np.float32),
-        rewards=rng.standard_normal(n, dtype=np.float32),
-        next_observations=obs + 0.01 * rng.standard_normal((n, obs_dim), dtype=np.float32),
-        dones=(rng.random(n) < 0.001).astype(np.float32),
-        observation_space=gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32),
-        action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32),
-        dataset_id="synthetic",
-        env_id=env_id,
-    )
 
 
 def make_pola(data: OfflineDataset, device: str = "cpu", seed: int = 0, **kwargs: Any) -> POLA:

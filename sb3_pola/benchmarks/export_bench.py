@@ -21,8 +21,9 @@ from typing import Any
 import numpy as np
 import torch as th
 
-from sb3_pola.benchmarks.common import TASK_SIZES, make_pola, synthetic_dataset
+from sb3_pola.benchmarks.common import TASK_SIZES, make_pola
 from sb3_pola.benchmarks.predict_bench import _SpacesEnv
+from sb3_pola.common.datasets import synthetic_dataset
 
 # policy_kwargs of the configurations timed: the paper's actor (3 x 256, products on) and the light CPU one's
 EXPORT_CONFIGS: dict[str, dict[str, Any]] = {"paper": {}, "light": {"net_arch": [128, 128]}}

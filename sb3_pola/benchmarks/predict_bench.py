@@ -15,7 +15,8 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 
-from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_replay, synchronize, synthetic_dataset
+from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_replay, synchronize
+from sb3_pola.common.datasets import synthetic_dataset
 
 
 class _SpacesEnv(gym.Env):

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 import torch as th
 
-from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_replay, synchronize, synthetic_dataset
+from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_replay, synchronize
+from sb3_pola.common.datasets import synthetic_dataset
 
 # the paper's configuration (N=10 critics, T=3 look-ahead steps, 5 diffusion steps, state products, batch 256)
 PAPER: dict[str, Any] = {
