@@ -99,6 +99,34 @@ def test_export_dataset_with_env_spec(tmp_path: pathlib.Path, monkeypatch: pytes
     env.close()
 
 
+def test_export_of_a_dict_observation_maze_evaluates_like_score(tmp_path: pathlib.Path) -> None:
+    """The shipped U-maze: the worker's env is score's (fixed-goal eval env, same flattening) step for step."""
+    pytest.importorskip("gymnasium_robotics")
+    from sb3_pola.common.datasets import make_env
+
+    data = load_offline_dataset("pointmaze/umaze-v0")
+    assert data.dict_observation_space is not None
+    meta = worker.load_npz(peers.export_dataset("pointmaze/umaze-v0", tmp_path / "u.npz"))
+    assert json.loads(meta["dict_keys"]) == ["achieved_goal", "desired_goal", "observation"]
+    assert "g" in json.dumps(json.loads(meta["env_kwargs"])["maze_map"])  # the eval env's fixed goal cell
+    ours, theirs = make_env(data), worker.make_env(meta)
+    assert theirs.spec is not None and theirs.spec.max_episode_steps == meta["max_episode_steps"] == 300
+    obs_ours, _ = ours.reset(seed=3)
+    obs_theirs, _ = theirs.reset(seed=3)
+    np.testing.assert_array_equal(obs_theirs, obs_ours)
+    assert obs_ours.shape == data.observations.shape[1:]
+    for _ in range(5):
+        action = np.array([0.5, -0.3], dtype=np.float32)
+        step_ours, step_theirs = ours.step(action), theirs.step(action)
+        np.testing.assert_array_equal(step_theirs[0], step_ours[0])
+        assert step_theirs[1:4] == step_ours[1:4] and "success" in step_theirs[4]
+    # data flattened in another order than the env's is refused
+    with pytest.raises(ValueError, match="dict keys"):
+        worker.make_env({**meta, "dict_keys": json.dumps(["observation", "achieved_goal", "desired_goal"])})
+    ours.close()
+    theirs.close()
+
+
 # ----------------------------------------------------------------------------------------- worker arrays
 
 
@@ -156,7 +184,7 @@ def test_worker_imports_only_its_venv_libraries() -> None:
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             modules.add(node.module.split(".")[0])
     third_party = modules - set(sys.stdlib_module_names)
-    assert third_party <= {"numpy", "gymnasium", "d3rlpy", "torch", "mujoco"}, third_party
+    assert third_party <= {"numpy", "gymnasium", "gymnasium_robotics", "d3rlpy", "torch", "mujoco"}, third_party
     assert worker.CSV_FIELDS == score.CSV_FIELDS
 
 

@@ -44,6 +44,11 @@ from sb3_pola.experiments.peers_worker import VARIANT_NAMES
 
 ALGOS = list(VARIANT_NAMES)
 PEER_REQUIREMENTS = ["d3rlpy==2.8.1", "gymnasium[mujoco]==1.0.*", "torch==2.13.0"]
+# Installed after PEER_REQUIREMENTS without their dependencies, for the point mazes of the Dict-observation
+# datasets: Gymnasium-Robotics 1.3.1 (the last whose pins allow gymnasium 1.0) caps mujoco below 3.2, which
+# would change the MuJoCo version the locomotion baselines are evaluated with; 1.4.2 declares gymnasium>=1.2
+# but its point mazes run on gymnasium 1.0 (tests/test_peers.py builds one through the worker's make_env).
+PEER_NO_DEPS_REQUIREMENTS = ["gymnasium-robotics==1.4.2", "pettingzoo==1.24.3"]
 WORKER = pathlib.Path(__file__).resolve().parent / "peers_worker.py"
 DEFAULT_VENV = ".venv-peers"
 
@@ -92,7 +97,10 @@ def export_arrays(data: Any, lengths: np.ndarray) -> dict[str, np.ndarray]:
         raise ValueError(f"next observations are not the following observations inside episodes (steps {bad[:5].tolist()})")
     timeouts = np.zeros(n, dtype=np.float32)
     timeouts[ends] = 1.0 - terminals[ends]
-    spec = json.loads(data.metadata["env_spec"]) if data.metadata.get("env_spec") else {}
+    # the env score evaluates in: the eval_env_spec where the dataset has one (the mazes' fixed goal)
+    spec_json = data.metadata.get("eval_env_spec") or data.metadata.get("env_spec")
+    spec = json.loads(spec_json) if spec_json else {}
+    dict_keys = list(data.dict_observation_space.spaces) if data.dict_observation_space is not None else []
     env_id = spec.get("id") or data.env_id or ""
     return {
         "observations": np.ascontiguousarray(data.observations, dtype=np.float32),
@@ -109,6 +117,8 @@ def export_arrays(data: Any, lengths: np.ndarray) -> dict[str, np.ndarray]:
         "env_id": np.array(env_id),
         "env_kwargs": np.array(json.dumps(spec.get("kwargs") or {})),
         "max_episode_steps": np.array(int(spec.get("max_episode_steps") or 0)),
+        # Dict observations: flattened in this key order (the order of the arrays above)
+        "dict_keys": np.array(json.dumps(dict_keys)),
         "ref_min_score": np.array(np.nan if data.ref_min_score is None else data.ref_min_score),
         "ref_max_score": np.array(np.nan if data.ref_max_score is None else data.ref_max_score),
     }
@@ -139,7 +149,7 @@ def venv_python(venv: pathlib.Path) -> pathlib.Path:
 def ensure_venv(venv: pathlib.Path, python: str = sys.executable, verbose: int = 1) -> pathlib.Path:
     """The peers venv's Python: the venv is created and :data:`PEER_REQUIREMENTS` installed unless its stamp says so."""
     stamp = venv / ".peers-installed"
-    wanted = "\n".join(PEER_REQUIREMENTS)
+    wanted = "\n".join([*PEER_REQUIREMENTS, *(f"{r} --no-deps" for r in PEER_NO_DEPS_REQUIREMENTS)])
     if stamp.is_file() and stamp.read_text() == wanted and venv_python(venv).exists():
         return venv_python(venv)
     if not venv_python(venv).exists():
@@ -149,6 +159,7 @@ def ensure_venv(venv: pathlib.Path, python: str = sys.executable, verbose: int =
     if verbose:
         print(f"[peers] installing {' '.join(PEER_REQUIREMENTS)} into {venv}")
     subprocess.run([str(venv_python(venv)), "-m", "pip", "install", "-q", *PEER_REQUIREMENTS], check=True)
+    subprocess.run([str(venv_python(venv)), "-m", "pip", "install", "-q", "--no-deps", *PEER_NO_DEPS_REQUIREMENTS], check=True)
     stamp.write_text(wanted)
     return venv_python(venv)
 

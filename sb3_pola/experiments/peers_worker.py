@@ -65,7 +65,7 @@ def load_npz(path: str | os.PathLike) -> dict[str, Any]:
     """The arrays and metadata of an exported dataset (strings and scalars unwrapped)."""
     with np.load(path, allow_pickle=False) as data:
         out: dict[str, Any] = {name: data[name] for name in data.files}
-    for key in ("dataset_id", "env_id", "env_kwargs"):
+    for key in ("dataset_id", "env_id", "env_kwargs", "dict_keys"):
         if key in out:
             out[key] = str(out[key])
     for key in ("ref_min_score", "ref_max_score"):
@@ -261,11 +261,28 @@ def build_dataset(arrays: dict[str, np.ndarray]) -> Any:
 
 
 def make_env(meta: dict[str, Any]) -> Any:
-    """The dataset's environment (its id, time limit and keyword arguments from the export)."""
+    """The dataset's environment (its id, time limit and keyword arguments from the export).
+
+    Ids Gymnasium does not know (the point mazes) are registered from ``gymnasium_robotics``. Dict
+    observations are flattened by Gymnasium's ``FlattenObservation``, in the space's key order, which must
+    be the export's ``dict_keys`` (the order of the arrays the baselines trained on).
+
+    :raises ValueError: the env's dict keys differ from the export's, or a flat env for dict data
+    """
     import gymnasium as gym
 
+    if meta["env_id"] not in gym.registry:
+        import gymnasium_robotics
+
+        gym.register_envs(gymnasium_robotics)
     kwargs = json.loads(meta.get("env_kwargs") or "{}")
-    return gym.make(meta["env_id"], max_episode_steps=meta.get("max_episode_steps"), **kwargs)
+    env = gym.make(meta["env_id"], max_episode_steps=meta.get("max_episode_steps"), **kwargs)
+    keys = json.loads(meta.get("dict_keys") or "[]")
+    space = env.observation_space
+    env_keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else []
+    if env_keys != keys:
+        raise ValueError(f"{meta['env_id']} observes the dict keys {env_keys}; the exported data was flattened from {keys}")
+    return gym.wrappers.FlattenObservation(env) if keys else env
 
 
 def unscale_action(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
