@@ -1,8 +1,8 @@
 """The main job (``make train`` / ``sb3-pola run``): train POLA on a dataset, evaluate it in the real env, report.
 
 Prints one table (dataset, gradient steps, wall time, steps/s, mean return, normalised score, the
-dataset's own average return) and writes ``model.zip``, ``learning_curve.png`` and
-``results.json`` into ``--out``.
+success rate where the env reports one (the mazes), the dataset's own average return) and writes
+``model.zip``, ``learning_curve.png`` and ``results.json`` into ``--out``.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import os
 import pathlib
 import platform
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -82,6 +83,30 @@ def plot_curve(
     plt.close(fig)
 
 
+def success_tracker() -> tuple[Callable[[dict[str, Any], dict[str, Any]], None], list[bool | None]]:
+    """An ``evaluate_policy`` callback and the list it fills: per finished episode, whether a step's
+    ``info["success"]`` (or ``info["is_success"]``) was true, as goal-reaching envs report it, else ``None``.
+    """
+    episodes: list[bool | None] = []
+    current: dict[int, bool | None] = {}
+
+    def callback(locals_: dict[str, Any], _globals: dict[str, Any]) -> None:
+        i, info = locals_["i"], locals_["info"]
+        for key in ("success", "is_success"):
+            if key in info:
+                current[i] = bool(current.get(i)) or bool(info[key])
+        if locals_["done"]:
+            episodes.append(current.pop(i, None))
+
+    return callback, episodes
+
+
+def success_rate(episodes: list[bool | None]) -> float | None:
+    """The fraction of successful episodes among those that report success (``None`` if none does)."""
+    reported = [float(s) for s in episodes if s is not None]
+    return float(np.mean(reported)) if reported else None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     import torch as th
@@ -141,8 +166,14 @@ def main(argv: list[str] | None = None) -> int:
     train_seconds = learn_seconds - TimedEval.eval_seconds - fit_seconds
 
     eval_time = time.perf_counter()
+    track_success, final_successes = success_tracker()
     final_returns, _ = evaluate_policy(
-        model, eval_env, n_eval_episodes=args.final_episodes, deterministic=True, return_episode_rewards=True
+        model,
+        eval_env,
+        n_eval_episodes=args.final_episodes,
+        deterministic=True,
+        return_episode_rewards=True,
+        callback=track_success,
     )
     eval_seconds += time.perf_counter() - eval_time
     model.save(out / "model.zip")
@@ -180,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         "mean_return": float(np.mean(final_returns)),
         "std_return": float(np.std(final_returns)),
         "normalized_score": model.normalized_score(np.asarray(final_returns)),
+        "success_rate": success_rate(final_successes[: args.final_episodes]),
         "dataset_average_return": dataset_return,
         "dataset_normalized_score": dataset_score,
         "dynamics_fit": model.dynamics_fit_info,
@@ -199,6 +231,7 @@ def main(argv: list[str] | None = None) -> int:
         ("return before training", f"{results['initial_return']:.1f}"),
         ("mean return", f"{results['mean_return']:.1f} +/- {results['std_return']:.1f} ({args.final_episodes} episodes)"),
         ("normalised score", fmt(results["normalized_score"])),
+        *([("success rate", f"{results['success_rate']:.2f}")] if results["success_rate"] is not None else []),
         ("dataset average return", f"{dataset_return:.1f} (normalised {fmt(dataset_score)})"),
     ]
     width = max(len(k) for k, _ in rows)
