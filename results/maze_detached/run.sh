@@ -5,5 +5,5 @@
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 .venv/bin/python -m sb3_pola.cli score --preset cpu --data-dir sb3_pola/data/datasets --device cpu --threads 1 \
-  --extra '{"backprop_through_model": false}' --variants ${VARIANTS:-T3 T1} --datasets pointmaze/umaze-v0 \
+  --extra '{"backprop_through_model": false}' --variants ${VARIANTS:-T3} --datasets pointmaze/umaze-v0 \
   --seeds ${SEEDS:-0 1 2} --out results/maze_detached
