@@ -48,7 +48,8 @@ def fmt(values: list[float], digits: int) -> str:
 
 def main() -> None:
     root = pathlib.Path("results")
-    print("| dataset | variant | look-ahead states | Q at the data | q_3 / q_0 | action saturation | critics' spread, actor / data |")
+    columns = ["dataset", "variant", "look-ahead states", "Q at the data", "q_3 / q_0", "action saturation"]
+    print("| " + " | ".join([*columns, "critics' spread, actor / data"]) + " |")
     print("|---|---|---|---|---|---|---|")
     for run, states in RUNS.items():
         groups: dict[tuple[str, str], list[dict]] = {}
