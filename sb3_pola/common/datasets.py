@@ -583,6 +583,32 @@ def make_env(dataset: OfflineDataset | str | os.PathLike, eval_env: bool = True,
     return flatten_env(gym.make(EnvSpec.from_json(spec_str), **env_kwargs))
 
 
+def synthetic_dataset(n: int, obs_dim: int, act_dim: int, env_id: str | None = None, seed: int = 0) -> OfflineDataset:
+    """An in-memory :class:`OfflineDataset` of ``n`` random transitions (no files, no downloads): for smoke tests and
+    benchmarks, where only the shapes matter.
+
+    :param n: number of transitions
+    :param obs_dim: observation size
+    :param act_dim: action size
+    :param env_id: environment id recorded in the dataset (selects the termination rule)
+    :param seed: seed of the arrays
+    :return: the dataset
+    """
+    rng = np.random.default_rng(seed)
+    obs = rng.standard_normal((n, obs_dim), dtype=np.float32)
+    return OfflineDataset(
+        observations=obs,
+        actions=rng.uniform(-1.0, 1.0, (n, act_dim)).astype(np.float32),
+        rewards=rng.standard_normal(n, dtype=np.float32),
+        next_observations=obs + 0.01 * rng.standard_normal((n, obs_dim), dtype=np.float32),
+        dones=(rng.random(n) < 0.001).astype(np.float32),
+        observation_space=gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32),
+        action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32),
+        dataset_id="synthetic",
+        env_id=env_id,
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     """``sb3-pola datasets``: list local datasets (id, steps, episodes, env, reference scores)."""
     parser = argparse.ArgumentParser(prog="sb3-pola datasets", description="List the Minari datasets found locally.")
@@ -623,29 +649,3 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
-
-
-def synthetic_dataset(n: int, obs_dim: int, act_dim: int, env_id: str | None = None, seed: int = 0) -> OfflineDataset:
-    """An in-memory :class:`OfflineDataset` of ``n`` random transitions (no files, no downloads): for smoke tests and
-    benchmarks, where only the shapes matter.
-
-    :param n: number of transitions
-    :param obs_dim: observation size
-    :param act_dim: action size
-    :param env_id: environment id recorded in the dataset (selects the termination rule)
-    :param seed: seed of the arrays
-    :return: the dataset
-    """
-    rng = np.random.default_rng(seed)
-    obs = rng.standard_normal((n, obs_dim), dtype=np.float32)
-    return OfflineDataset(
-        observations=obs,
-        actions=rng.uniform(-1.0, 1.0, (n, act_dim)).astype(np.float32),
-        rewards=rng.standard_normal(n, dtype=np.float32),
-        next_observations=obs + 0.01 * rng.standard_normal((n, obs_dim), dtype=np.float32),
-        dones=(rng.random(n) < 0.001).astype(np.float32),
-        observation_space=gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32),
-        action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), np.float32),
-        dataset_id="synthetic",
-        env_id=env_id,
-    )

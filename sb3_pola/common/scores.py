@@ -1,4 +1,4 @@
-"""The D4RL normalised score, ``100 (R - ref_min) / (ref_max - ref_min)``: the one implementation.
+"""The D4RL normalised score, ``100 (R - ref_min) / (ref_max - ref_min)``, and the success rate: the one implementation.
 
 This module imports only NumPy and the standard library: the d3rlpy baselines' worker
 (:mod:`sb3_pola.experiments.peers_worker`) runs in a virtual environment without ``sb3_pola`` and
@@ -8,7 +8,8 @@ loads this file by its path.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -65,4 +66,26 @@ def normalized_score(
     return float(normalized_scores(mean_return, ref_min, ref_max))
 
 
-__all__ = ["has_reference_scores", "normalized_score", "normalized_scores"]
+# the step-info keys goal-reaching envs report success under (Gymnasium-Robotics' mazes: "success")
+SUCCESS_KEYS = ("success", "is_success")
+
+
+def update_success(success: bool | None, info: Mapping[str, Any]) -> bool | None:
+    """An episode's success after one more step: true once a step's info reports it, ``None`` while none reports any.
+
+    :param success: the episode's success so far (``None`` at its start)
+    :param info: the step's info dict
+    """
+    for key in SUCCESS_KEYS:
+        if key in info:
+            success = bool(success) or bool(info[key])
+    return success
+
+
+def success_rate(successes: Iterable[bool | None]) -> float | None:
+    """The fraction of successful episodes among those that report success (``None`` if none does)."""
+    reported = [float(s) for s in successes if s is not None]
+    return float(np.mean(reported)) if reported else None
+
+
+__all__ = ["SUCCESS_KEYS", "has_reference_scores", "normalized_score", "normalized_scores", "success_rate", "update_success"]

@@ -315,9 +315,7 @@ def evaluate(
             )
             returns[i] += float(reward)
             done = bool(terminated or truncated)
-            for key in ("success", "is_success"):
-                if key in info:
-                    success = bool(success) or bool(info[key])
+            success = update_success(success, info)
         if successes is not None:
             successes.append(success)
     return returns
@@ -333,8 +331,9 @@ def _load_scores_module() -> Any:
     return module
 
 
-# per-episode D4RL scores (NaN without reference scores): the package's one implementation
-normalized_scores = _load_scores_module().normalized_scores
+# per-episode D4RL scores (NaN without reference scores) and the success rate: the package's one implementation
+_scores = _load_scores_module()
+normalized_scores, update_success, success_rate = _scores.normalized_scores, _scores.update_success, _scores.success_rate
 
 
 def eval_row(
@@ -344,7 +343,7 @@ def eval_row(
     successes: list[bool | None] = []
     returns = evaluate(algo, env, episodes, 10_000 * (seed + 1), meta["action_low"], meta["action_high"], successes)
     scores = normalized_scores(returns, meta.get("ref_min_score"), meta.get("ref_max_score"))
-    reported = [float(s) for s in successes if s is not None]
+    rate = success_rate(successes)
     return {
         "dataset": dataset_id,
         "variant": variant,
@@ -354,7 +353,7 @@ def eval_row(
         "score_std": round(float(np.std(scores)), 3),
         "mean_return": round(float(np.mean(returns)), 2),
         "eval_episodes": episodes,
-        "success": round(float(np.mean(reported)), 3) if reported else float("nan"),
+        "success": float("nan") if rate is None else round(rate, 3),
     }
 
 

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from sb3_pola.common.scores import success_rate, update_success
+
 # Light enough for a 2-core CPU in a few minutes; the paper's configuration is `PAPER_CONFIG` (needs a GPU).
 LIGHT_CONFIG: dict[str, Any] = dict(
     n_critics=4,
@@ -84,27 +86,19 @@ def plot_curve(
 
 
 def success_tracker() -> tuple[Callable[[dict[str, Any], dict[str, Any]], None], list[bool | None]]:
-    """An ``evaluate_policy`` callback and the list it fills: per finished episode, whether a step's
-    ``info["success"]`` (or ``info["is_success"]``) was true, as goal-reaching envs report it, else ``None``.
+    """An ``evaluate_policy`` callback and the list it fills: per finished episode, whether a step's info reported
+    success (:func:`~sb3_pola.common.scores.update_success`), else ``None``.
     """
     episodes: list[bool | None] = []
     current: dict[int, bool | None] = {}
 
     def callback(locals_: dict[str, Any], _globals: dict[str, Any]) -> None:
-        i, info = locals_["i"], locals_["info"]
-        for key in ("success", "is_success"):
-            if key in info:
-                current[i] = bool(current.get(i)) or bool(info[key])
+        i = locals_["i"]
+        current[i] = update_success(current.get(i), locals_["info"])
         if locals_["done"]:
-            episodes.append(current.pop(i, None))
+            episodes.append(current.pop(i))
 
     return callback, episodes
-
-
-def success_rate(episodes: list[bool | None]) -> float | None:
-    """The fraction of successful episodes among those that report success (``None`` if none does)."""
-    reported = [float(s) for s in episodes if s is not None]
-    return float(np.mean(reported)) if reported else None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -211,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
         "mean_return": float(np.mean(final_returns)),
         "std_return": float(np.std(final_returns)),
         "normalized_score": model.normalized_score(np.asarray(final_returns)),
-        "success_rate": success_rate(final_successes[: args.final_episodes]),
+        "success_rate": success_rate(final_successes),
         "dataset_average_return": dataset_return,
         "dataset_normalized_score": dataset_score,
         "dynamics_fit": model.dynamics_fit_info,

@@ -52,6 +52,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+from sb3_pola.common.scores import success_rate, update_success
 from sb3_pola.experiments.diagnostics import write_diagnostics
 
 if TYPE_CHECKING:
@@ -302,9 +303,7 @@ def _episode_returns(
             obs, reward, terminated, truncated, info = env.step(action)
             returns[i] += float(reward)
             done = terminated or truncated
-            for key in ("success", "is_success"):
-                if key in info:
-                    success = bool(success) or bool(info[key])
+            success = update_success(success, info)
         successes.append(success)
     return returns
 
@@ -314,13 +313,13 @@ def evaluation_scores(model: Any, env: Any, n_episodes: int, seed: int, determin
     successes: list[bool | None] = []
     returns = evaluate(model, env, n_episodes, seed=10_000 * (seed + 1), deterministic=deterministic, successes=successes)
     scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
-    reported = [float(s) for s in successes if s is not None]
+    rate = success_rate(successes)
     return {
         "score": round(float(np.mean(scores)), 3),
         "score_std": round(float(np.std(scores)), 3),
         "mean_return": round(float(np.mean(returns)), 2),
         "eval_episodes": n_episodes,
-        "success": round(float(np.mean(reported)), 3) if reported else math.nan,
+        "success": math.nan if rate is None else round(rate, 3),
     }
 
 
