@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import pytest
 import torch as th
-from helpers import light_kwargs
+from helpers import light_kwargs, model_on_dataset
 
 from sb3_pola import POLA
+from sb3_pola.common.datasets import synthetic_dataset
 from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 from sb3_pola.common.schedules import WarmupSchedule, warmup_schedule
-from sb3_pola.pola.pola import lookahead_q_objective
+from sb3_pola.pola.pola import ensemble_similarity, lookahead_q_objective
 
 
 # ---------------------------------------------------------------- eta schedule
@@ -86,11 +87,57 @@ def test_auto_q_scale_floor_is_the_datasets_value_scale(pendulum_path, tmp_path)
         ({"lookahead_normalization": "sum"}, "lookahead_normalization"),
         ({"q_scale_floor": "dataset"}, "q_scale_floor"),
         ({"lookahead_uncertainty_penalty": -1.0}, "penalty"),
+        ({"critic_diversity": -0.1}, "critic_diversity"),
+        ({"critic_diversity": 1.0, "n_critics": 1, "top_k": 1}, "n_critics >= 2"),
     ],
 )
 def test_bad_option_values_raise(pendulum_path, kwargs, match):
     with pytest.raises(ValueError, match=match):
         POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(**kwargs))
+
+
+# ---------------------------------------------------------------- a critic ensemble that disagrees off the data
+def test_ensemble_similarity_is_the_mean_pairwise_cosine():
+    grads = th.randn(4, 9, 3)  # [N, B, A]
+    unit = grads / grads.norm(dim=-1, keepdim=True)
+    gram = th.einsum("iba,jba->bij", unit, unit)  # [B, N, N]
+    pairwise = (gram.sum(dim=(1, 2)) - gram.diagonal(dim1=1, dim2=2).sum(dim=1)).mean() / 3
+    assert ensemble_similarity(grads).item() == pytest.approx(pairwise.item(), abs=1e-6)
+    same = th.randn(1, 9, 3).expand(4, -1, -1)
+    assert ensemble_similarity(same).item() == pytest.approx(4.0, abs=1e-5)  # N: every pair aligned
+    opposed = th.stack([th.tensor([1.0, 0.0]), th.tensor([-1.0, 0.0])]).unsqueeze(1)  # [2, 1, 2]
+    assert ensemble_similarity(opposed).item() == pytest.approx(-2.0, abs=1e-5)
+
+
+def test_critic_diversity_decorrelates_the_members():
+    """Trained with the term, the members' action gradients at the data are less alike than without it."""
+    data = synthetic_dataset(2_000, 5, 3)
+    similarity = {}
+    for weight in (0.0, 1.0):
+        kwargs = {
+            k: v for k, v in light_kwargs(rollout_length=0, critic_diversity=weight).items() if k not in ("seed", "device")
+        }
+        model = model_on_dataset(data, **kwargs)
+        buffer = model._setup_offline_data()
+        for _ in range(200):
+            stats = model._update(buffer.sample(32))
+        assert ("critic_similarity" in stats) == (weight > 0)
+        th.manual_seed(0)
+        batch = buffer.sample(512)
+        member_actions = batch.actions.unsqueeze(0).expand(model.n_critics, -1, -1).clone().requires_grad_(True)
+        (grads,) = th.autograd.grad(model.critic(batch.observations, member_actions).sum(), member_actions)
+        similarity[weight] = ensemble_similarity(grads).item()
+    assert similarity[1.0] < similarity[0.0] - 0.3, similarity
+
+
+def test_per_member_actions_give_each_critic_its_own_input(pendulum_path):
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=0))
+    model.learn(1)
+    batch = model.replay_buffer.sample(8)
+    shared = model.critic(batch.observations, batch.actions)  # [N, B]
+    per_member = th.stack([batch.actions, -batch.actions, batch.actions])  # [N, B, A]
+    q = model.critic(batch.observations, per_member)
+    assert th.allclose(q[0], shared[0]) and th.allclose(q[2], shared[2]) and not th.allclose(q[1], shared[1])
 
 
 # ---------------------------------------------------------------- the model's uncertainty in the look-ahead

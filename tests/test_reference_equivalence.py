@@ -80,8 +80,15 @@ def reference_step(model, policy, batch) -> dict[str, object]:
     with th.no_grad():
         next_q = ref_q(policy.critic_target, next_obs, ref_sample(policy.actor_ema, feats(next_obs))).min(dim=0).values
         target = rewards + model.gamma * (1.0 - dones) * next_q
-    q = ref_q(critic, obs, actions)
-    critic_loss = sum(((q[i] - target) ** 2).mean() for i in range(critic.n_critics))
+    n = critic.n_critics
+    member_actions = [actions.clone().requires_grad_(True) for _ in range(n)]
+    q = th.stack([ref_q(critic, obs, member_actions[i])[i] for i in range(n)])
+    critic_loss = sum(((q[i] - target) ** 2).mean() for i in range(n))
+    if model.critic_diversity > 0:  # EDAC eq. 8: cosine similarity of every pair of members' action gradients
+        grads = [th.autograd.grad(q[i].sum(), member_actions[i], create_graph=True)[0] for i in range(n)]
+        units = [g / (g.norm(dim=-1, keepdim=True) + 1e-10) for g in grads]
+        pairs = sum((units[i] * units[j]).sum(dim=-1) for i in range(n) for j in range(n) if i != j)
+        critic_loss = critic_loss + model.critic_diversity * pairs.mean() / (n - 1)
     critic.optimizer.zero_grad()
     critic_loss.backward()
     critic_grads = [p.grad.clone() for p in critic.parameters()]
@@ -159,6 +166,7 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         {"eta": lambda progress: 0.25 + progress},
         {"lookahead_uncertainty_penalty": 0.7, "lookahead_normalization": "weights"},
         {"lookahead_uncertainty_cutoff": 0.215, "lookahead_uncertainty_penalty": 0.3},
+        {"critic_diversity": 0.8},
     ],
 )
 def test_update_matches_reference(kwargs):
@@ -310,12 +318,13 @@ def test_compiled_mish_equals_mish():
     _close(FusedMish()(x), F.mish(x))
 
 
-@pytest.mark.parametrize("cudagraph_path", [False, True])
-def test_compiled_update_matches_eager(monkeypatch, cudagraph_path):
+@pytest.mark.parametrize("cudagraph_path, critic_diversity", [(False, 0.0), (True, 0.0), (False, 0.5)])
+def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diversity):
     """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
 
     ``cudagraph_path`` runs the CUDA code path on CPU (inductor's ``triton.cudagraphs`` option, step marks, output
-    copies); inductor captures graphs only on CUDA, so this checks the plumbing, not the capture.
+    copies); inductor captures graphs only on CUDA, so this checks the plumbing, not the capture. With
+    ``critic_diversity`` the critic loss (a second derivative) stays eager, its Mish too, and the actor's is compiled.
     """
     from torch._dynamo.utils import counters
 
@@ -332,6 +341,7 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path):
         n_diffusion_steps=2,
         policy_kwargs={"net_arch": [16]},
         dynamics_kwargs={"n_members": 2, "n_elites": 2, "hidden_dim": 8, "n_layers": 1},
+        critic_diversity=critic_diversity,
     )
     eager, compiled = _model(**kwargs), _model(compile_update=True, **kwargs)
     compiled.policy.load_state_dict(eager.policy.state_dict())
@@ -352,7 +362,11 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path):
     assert graphs[0] > 0 and graphs[-1] == graphs[0], "the compiled losses were recompiled after the first step"
     for got, want in zip(compiled.policy.parameters(), eager.policy.parameters(), strict=True):
         _close(got, want)
-    assert compiled._critic_loss_fn.compiled_ok and compiled._actor_loss_fn.compiled_ok
+    assert compiled._actor_loss_fn.compiled_ok
+    if critic_diversity:
+        assert compiled._critic_loss_fn.compiled is None
+    else:
+        assert compiled._critic_loss_fn.compiled_ok
     assert eager._critic_loss_fn.compiled is None and eager._actor_loss_fn.compiled is None
 
 

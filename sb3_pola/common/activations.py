@@ -10,8 +10,9 @@ falls back to ``F.mish`` with a warning.
 
 from __future__ import annotations
 
+import contextlib
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import torch as th
 from torch import nn
@@ -34,6 +35,19 @@ MIN_COMPILED_NUMEL = 16_384
 
 _compiled: Callable[[th.Tensor], th.Tensor] | None = None
 _failed = False
+_eager_depth = 0
+
+
+@contextlib.contextmanager
+def eager_activations() -> Iterator[None]:
+    """``F.mish`` inside this block: for graphs that are differentiated twice (``create_graph=True``), which a
+    compiled kernel's backward does not support."""
+    global _eager_depth
+    _eager_depth += 1
+    try:
+        yield
+    finally:
+        _eager_depth -= 1
 
 
 def compiled_mish(x: th.Tensor) -> th.Tensor:
@@ -43,7 +57,7 @@ def compiled_mish(x: th.Tensor) -> th.Tensor:
         return mish_exp(x)
     # eager for small tensors, and under a dispatch mode (FLOP counters, profilers' modes), which would make
     # dynamo recompile for every mode until its cache limit, after which it runs mish_exp unfused
-    if _failed or x.numel() < MIN_COMPILED_NUMEL or _get_current_dispatch_mode() is not None:
+    if _failed or _eager_depth or x.numel() < MIN_COMPILED_NUMEL or _get_current_dispatch_mode() is not None:
         return F.mish(x)
     if _compiled is None:
         _compiled = th.compile(mish_exp, dynamic=True)
@@ -67,4 +81,4 @@ def fused_activation(activation_fn: type[nn.Module]) -> type[nn.Module]:
     return FusedMish if activation_fn is nn.Mish else activation_fn
 
 
-__all__: list[str] = ["EXP_CLAMP", "FusedMish", "compiled_mish", "fused_activation", "mish_exp"]
+__all__: list[str] = ["EXP_CLAMP", "FusedMish", "compiled_mish", "eager_activations", "fused_activation", "mish_exp"]

@@ -15,6 +15,7 @@ from stable_baselines3.common.type_aliases import GymEnv, ReplayBufferSamples, S
 from stable_baselines3.common.utils import FloatSchedule
 from torch.nn.utils import clip_grad_norm_
 
+from sb3_pola.common.activations import eager_activations
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.compile import CompiledLoss
 from sb3_pola.common.datasets import DatasetLocation, OfflineDataset
@@ -40,6 +41,23 @@ LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
 def lookahead_weights(gamma_powers: th.Tensor, normalization: str) -> th.Tensor:
     """``[T+1]`` weights of the look-ahead terms: ``gamma^i`` (eq. 3), or divided by their sum (``"weights"``)."""
     return gamma_powers / gamma_powers.sum() if normalization == "weights" else gamma_powers
+
+
+def ensemble_similarity(q_action_grads: th.Tensor) -> th.Tensor:
+    """EDAC's ensemble similarity (An et al., 2021, eq. 8): ``sum_{i != j} <g_i, g_j> / (N - 1)``, batch mean.
+
+    ``g_i`` is member ``i``'s action gradient ``grad_a Q_i(s, a)`` at the dataset's ``(s, a)``, scaled to unit length.
+    Penalising it makes the members' gradients point in different directions, so their Q-values part ways as
+    the action leaves the data and the ensemble's minimum becomes pessimistic there.
+
+    :param q_action_grads: ``[N, B, A]`` action gradients of the ``N`` members
+    :return: the similarity, a scalar in ``[-N / (N - 1), N]`` (``N``: all members alike)
+    """
+    n_members = q_action_grads.shape[0]
+    unit = q_action_grads / (q_action_grads.norm(dim=-1, keepdim=True) + 1e-10)  # [N, B, A]
+    # sum_{i != j} <u_i, u_j> = |sum_i u_i|^2 - sum_i |u_i|^2, without the [B, N, N] Gram matrix
+    pairs = unit.sum(dim=0).pow(2).sum(dim=-1) - unit.pow(2).sum(dim=(0, 2))  # [B]
+    return pairs.mean() / (n_members - 1)
 
 
 def lookahead_q_objective(
@@ -125,6 +143,11 @@ class POLA(OfflineAlgorithm):
         so while the critic is immature (``|Q|`` far below the returns it will reach) its gradient pulls
         the actor in proportion to how far it has learned, instead of at full strength from the first step.
         A float: that floor
+    :param critic_diversity: weight ``eta_ES`` of EDAC's ensemble-similarity term added to the critic loss
+        (:func:`ensemble_similarity`): it decorrelates the members' action gradients at the data, so that they
+        disagree off it and the minimum over the ensemble (targets) and its top-K (eq. 4) are pessimistic where the
+        actor leaves the data. ``0``: off (the paper). With it on, the critic loss runs eagerly (``compile_update``
+        compiles the actor loss only): it takes a second derivative, which ``torch.compile`` does not trace
     :param lookahead_uncertainty_penalty: weight ``lambda`` of a MOPO-style penalty added to ``L_q``:
         ``lambda sum_{i>=1} w_i mean(alive * u_i)``, ``u_i`` the disagreement of the dynamics model's elites
         on the step into ``s_{t+i}`` (RMS over state dimensions of the elites' standard deviation, in
@@ -181,6 +204,7 @@ class POLA(OfflineAlgorithm):
         eta: float | Schedule = 1.0,
         lookahead_normalization: str = "first",
         q_scale_floor: float | str | None = None,
+        critic_diversity: float = 0.0,
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
         backprop_through_model: bool = True,
@@ -229,6 +253,10 @@ class POLA(OfflineAlgorithm):
             )
         if isinstance(q_scale_floor, str) and q_scale_floor != "auto":
             raise ValueError(f"q_scale_floor must be None, 'auto' or a float, got {q_scale_floor!r}")
+        if critic_diversity < 0:
+            raise ValueError(f"critic_diversity must be >= 0, got {critic_diversity}")
+        if critic_diversity > 0 and n_critics < 2:
+            raise ValueError("critic_diversity needs n_critics >= 2")
         if lookahead_uncertainty_penalty < 0:
             raise ValueError(f"lookahead_uncertainty_penalty must be >= 0, got {lookahead_uncertainty_penalty}")
         self.n_critics = n_critics
@@ -239,6 +267,7 @@ class POLA(OfflineAlgorithm):
         self.q_scale_floor = q_scale_floor
         # the floor's value: q_scale_floor, or the dataset's value scale once the data are loaded ("auto")
         self.q_scale_floor_value: float | None = None if q_scale_floor == "auto" else float(q_scale_floor or 0.0)
+        self.critic_diversity = critic_diversity
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
         self.lookahead_uncertainty_cutoff = lookahead_uncertainty_cutoff
         self.backprop_through_model = backprop_through_model
@@ -293,7 +322,8 @@ class POLA(OfflineAlgorithm):
             self._sample_target: Callable[[th.Tensor], th.Tensor] = functools.partial(sample_chain, self.policy.actor_ema)
         else:
             self._sample_target = functools.partial(sample_no_grad, self.policy.actor_ema, copy_weights=True)
-        self._critic_loss_fn = CompiledLoss(self._critic_loss, self.compile_update, self._cudagraphs, starts_step=True)
+        compile_critic = self.compile_update and self.critic_diversity == 0  # no double backward in torch.compile
+        self._critic_loss_fn = CompiledLoss(self._critic_loss, compile_critic, self._cudagraphs, starts_step=True)
         self._actor_loss_fn = CompiledLoss(self._actor_loss, self.compile_update, self._cudagraphs)
 
     @property
@@ -409,10 +439,18 @@ class POLA(OfflineAlgorithm):
             next_actions = self._sample_target(self.policy.actor_features(next_obs))  # a' from the EMA actor
             next_q = self.critic_target(next_obs, next_actions).min(dim=0).values  # [B]
             target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
-        current_q = self.critic(obs, actions)  # [N, B]
+        if self.critic_diversity > 0:  # a copy of the actions per member, so each member's gradient is its own
+            actions = actions.unsqueeze(0).expand(self.n_critics, -1, -1).clone().requires_grad_(True)  # [N, B, A]
+        with eager_activations() if self.critic_diversity > 0 else contextlib.nullcontext():  # a second derivative
+            current_q = self.critic(obs, actions)  # [N, B]
         critic_loss = (current_q - target_q).pow(2).mean(dim=1).sum()
         q = current_q.detach()
         stats = {"q_mean": q.mean(), "q_ensemble_std": q.std(dim=0).mean(), "target_q": target_q.mean()}
+        if self.critic_diversity > 0:
+            (q_action_grads,) = th.autograd.grad(current_q.sum(), actions, create_graph=True)  # [N, B, A]
+            similarity = ensemble_similarity(q_action_grads)
+            critic_loss = critic_loss + self.critic_diversity * similarity
+            stats["critic_similarity"] = similarity.detach()
         return critic_loss, {"critic_loss": critic_loss.detach(), **stats}
 
     @property
