@@ -89,6 +89,7 @@ def test_auto_q_scale_floor_is_the_datasets_value_scale(pendulum_path, tmp_path)
         ({"lookahead_uncertainty_penalty": -1.0}, "penalty"),
         ({"critic_diversity": -0.1}, "critic_diversity"),
         ({"critic_diversity": 1.0, "n_critics": 1, "top_k": 1}, "n_critics >= 2"),
+        ({"critic_diversity_inputs": "states"}, "critic_diversity_inputs"),
     ],
 )
 def test_bad_option_values_raise(pendulum_path, kwargs, match):
@@ -124,19 +125,19 @@ def test_critic_diversity_decorrelates_the_members():
         assert ("critic_similarity" in stats) == (weight > 0)
         th.manual_seed(0)
         batch = buffer.sample(512)
-        member_actions = batch.actions.unsqueeze(0).expand(model.n_critics, -1, -1).clone().requires_grad_(True)
-        (grads,) = th.autograd.grad(model.critic(batch.observations, member_actions).sum(), member_actions)
-        similarity[weight] = ensemble_similarity(grads).item()
+        inputs = model.critic.inputs(batch.observations, batch.actions).expand(model.n_critics, -1, -1).clone()
+        (grads,) = th.autograd.grad(model.critic.q_values(inputs.requires_grad_(True)).sum(), inputs)  # [N, B, in]
+        similarity[weight] = ensemble_similarity(grads[..., -batch.actions.shape[-1] :]).item()
     assert similarity[1.0] < similarity[0.0] - 0.3, similarity
 
 
-def test_per_member_actions_give_each_critic_its_own_input(pendulum_path):
+def test_per_member_inputs_give_each_critic_its_own(pendulum_path):
     model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=0))
     model.learn(1)
     batch = model.replay_buffer.sample(8)
     shared = model.critic(batch.observations, batch.actions)  # [N, B]
-    per_member = th.stack([batch.actions, -batch.actions, batch.actions])  # [N, B, A]
-    q = model.critic(batch.observations, per_member)
+    x = model.critic.inputs(batch.observations, batch.actions)  # [B, in]
+    q = model.critic.q_values(th.stack([x, -x, x]))  # [N, B, in]
     assert th.allclose(q[0], shared[0]) and th.allclose(q[2], shared[2]) and not th.allclose(q[1], shared[1])
 
 

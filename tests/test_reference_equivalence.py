@@ -42,9 +42,9 @@ def _model(**kwargs):
     return model_on_dataset(data, **params)
 
 
-def ref_q(critic, obs: th.Tensor, actions: th.Tensor, detach: bool = False) -> th.Tensor:
+def ref_q(critic, obs: th.Tensor | None, actions: th.Tensor, detach: bool = False, features=None) -> th.Tensor:
     """``[N, B]`` Q-values, member by member with plain matmuls (no batched ensemble)."""
-    x = th.cat((critic.features_extractor(obs), actions), dim=-1)
+    x = th.cat((critic.features_extractor(obs) if features is None else features, actions), dim=-1)
     layers = [m for m in critic.q_net if hasattr(m, "weight")]
     out = []
     for i in range(critic.n_critics):
@@ -81,11 +81,19 @@ def reference_step(model, policy, batch) -> dict[str, object]:
         next_q = ref_q(policy.critic_target, next_obs, ref_sample(policy.actor_ema, feats(next_obs))).min(dim=0).values
         target = rewards + model.gamma * (1.0 - dones) * next_q
     n = critic.n_critics
+    # each member its own copy of the state features and the action, for the similarity term's gradients
+    member_feats = [critic.features_extractor(obs).detach().requires_grad_(True) for _ in range(n)]
     member_actions = [actions.clone().requires_grad_(True) for _ in range(n)]
-    q = th.stack([ref_q(critic, obs, member_actions[i])[i] for i in range(n)])
+    q = th.stack([ref_q(critic, None, member_actions[i], features=member_feats[i])[i] for i in range(n)])
     critic_loss = sum(((q[i] - target) ** 2).mean() for i in range(n))
-    if model.critic_diversity > 0:  # EDAC eq. 8: cosine similarity of every pair of members' action gradients
-        grads = [th.autograd.grad(q[i].sum(), member_actions[i], create_graph=True)[0] for i in range(n)]
+    if model.critic_diversity > 0:  # EDAC eq. 8: cosine similarity of every pair of members' input gradients
+        if model.critic_diversity_inputs == "actions":
+            grads = [th.autograd.grad(q[i].sum(), member_actions[i], create_graph=True)[0] for i in range(n)]
+        else:
+            grads = [
+                th.cat(th.autograd.grad(q[i].sum(), (member_feats[i], member_actions[i]), create_graph=True), dim=-1)
+                for i in range(n)
+            ]
         units = [g / (g.norm(dim=-1, keepdim=True) + 1e-10) for g in grads]
         pairs = sum((units[i] * units[j]).sum(dim=-1) for i in range(n) for j in range(n) if i != j)
         critic_loss = critic_loss + model.critic_diversity * pairs.mean() / (n - 1)
@@ -167,6 +175,7 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         {"lookahead_uncertainty_penalty": 0.7, "lookahead_normalization": "weights"},
         {"lookahead_uncertainty_cutoff": 0.215, "lookahead_uncertainty_penalty": 0.3},
         {"critic_diversity": 0.8},
+        {"critic_diversity": 0.6, "critic_diversity_inputs": "states_and_actions", "rollout_length": 1},
     ],
 )
 def test_update_matches_reference(kwargs):

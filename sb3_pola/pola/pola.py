@@ -36,6 +36,7 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
 
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
+CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
 
 
 def lookahead_weights(gamma_powers: th.Tensor, normalization: str) -> th.Tensor:
@@ -148,6 +149,10 @@ class POLA(OfflineAlgorithm):
         disagree off it and the minimum over the ensemble (targets) and its top-K (eq. 4) are pessimistic where the
         actor leaves the data. ``0``: off (the paper). With it on, the critic loss runs eagerly (``compile_update``
         compiles the actor loss only): it takes a second derivative, which ``torch.compile`` does not trace
+    :param critic_diversity_inputs: the gradients the similarity term compares: ``"actions"`` (EDAC:
+        ``grad_a Q_i``), or ``"states_and_actions"`` (the gradient over the critic's whole input, state features
+        and action): the look-ahead's gradient through the model reaches the actor by ``grad_s Q``, so this makes
+        the members disagree on where the predicted states should go as well
     :param lookahead_uncertainty_penalty: weight ``lambda`` of a MOPO-style penalty added to ``L_q``:
         ``lambda sum_{i>=1} w_i mean(alive * u_i)``, ``u_i`` the disagreement of the dynamics model's elites
         on the step into ``s_{t+i}`` (RMS over state dimensions of the elites' standard deviation, in
@@ -205,6 +210,7 @@ class POLA(OfflineAlgorithm):
         lookahead_normalization: str = "first",
         q_scale_floor: float | str | None = None,
         critic_diversity: float = 0.0,
+        critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
         backprop_through_model: bool = True,
@@ -255,6 +261,10 @@ class POLA(OfflineAlgorithm):
             raise ValueError(f"q_scale_floor must be None, 'auto' or a float, got {q_scale_floor!r}")
         if critic_diversity < 0:
             raise ValueError(f"critic_diversity must be >= 0, got {critic_diversity}")
+        if critic_diversity_inputs not in CRITIC_DIVERSITY_INPUTS:
+            raise ValueError(
+                f"critic_diversity_inputs must be one of {CRITIC_DIVERSITY_INPUTS}, got {critic_diversity_inputs!r}"
+            )
         if critic_diversity > 0 and n_critics < 2:
             raise ValueError("critic_diversity needs n_critics >= 2")
         if lookahead_uncertainty_penalty < 0:
@@ -268,6 +278,7 @@ class POLA(OfflineAlgorithm):
         # the floor's value: q_scale_floor, or the dataset's value scale once the data are loaded ("auto")
         self.q_scale_floor_value: float | None = None if q_scale_floor == "auto" else float(q_scale_floor or 0.0)
         self.critic_diversity = critic_diversity
+        self.critic_diversity_inputs = critic_diversity_inputs
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
         self.lookahead_uncertainty_cutoff = lookahead_uncertainty_cutoff
         self.backprop_through_model = backprop_through_model
@@ -439,16 +450,21 @@ class POLA(OfflineAlgorithm):
             next_actions = self._sample_target(self.policy.actor_features(next_obs))  # a' from the EMA actor
             next_q = self.critic_target(next_obs, next_actions).min(dim=0).values  # [B]
             target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
-        if self.critic_diversity > 0:  # a copy of the actions per member, so each member's gradient is its own
-            actions = actions.unsqueeze(0).expand(self.n_critics, -1, -1).clone().requires_grad_(True)  # [N, B, A]
-        with eager_activations() if self.critic_diversity > 0 else contextlib.nullcontext():  # a second derivative
+        if self.critic_diversity == 0:
             current_q = self.critic(obs, actions)  # [N, B]
+        else:  # a copy of the input per member, so that each member's input gradient is its own
+            inputs = self.critic.inputs(obs, actions).unsqueeze(0).expand(self.n_critics, -1, -1).clone()  # [N, B, in]
+            inputs.requires_grad_(True)
+            with eager_activations():  # the loss takes a second derivative
+                current_q = self.critic.q_values(inputs)  # [N, B]
         critic_loss = (current_q - target_q).pow(2).mean(dim=1).sum()
         q = current_q.detach()
         stats = {"q_mean": q.mean(), "q_ensemble_std": q.std(dim=0).mean(), "target_q": target_q.mean()}
         if self.critic_diversity > 0:
-            (q_action_grads,) = th.autograd.grad(current_q.sum(), actions, create_graph=True)  # [N, B, A]
-            similarity = ensemble_similarity(q_action_grads)
+            (input_grads,) = th.autograd.grad(current_q.sum(), inputs, create_graph=True)  # [N, B, in]
+            if self.critic_diversity_inputs == "actions":  # EDAC
+                input_grads = input_grads[..., -actions.shape[-1] :]  # [N, B, A]
+            similarity = ensemble_similarity(input_grads)
             critic_loss = critic_loss + self.critic_diversity * similarity
             stats["critic_similarity"] = similarity.detach()
         return critic_loss, {"critic_loss": critic_loss.detach(), **stats}

@@ -135,13 +135,18 @@ class EnsembleCritic(nn.Module):
         self.q_net = vectorized_mlp(features_extractor.features_dim + action_dim, 1, net_arch, n_critics, activation_fn)
 
     def forward(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
-        """Q-values of every member: ``[B, obs], [B, A] -> [N, B]``; actions ``[N, B, A]``: one set per member."""
-        features = self.features_extractor(obs)  # [B, F]
-        if actions.dim() == 3:  # per-member actions, so that each member's action gradient is its own
-            x = th.cat((features.unsqueeze(0).expand(self.n_critics, -1, -1), actions), dim=-1)  # [N, B, in]
-        else:
-            x = th.cat((features, actions), dim=-1).unsqueeze(0).expand(self.n_critics, -1, -1)  # [N, B, in], no copy
-        return self.q_net(x).squeeze(-1)
+        """Q-values of every member: ``[B, obs], [B, A] -> [N, B]``."""
+        return self.q_values(self.inputs(obs, actions))
+
+    def inputs(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """The members' shared input ``[B, in]``: state features, then the action."""
+        return th.cat((self.features_extractor(obs), actions), dim=-1)
+
+    def q_values(self, inputs: th.Tensor) -> th.Tensor:
+        """``[B, in]`` (one input for all members) or ``[N, B, in]`` (one per member) ``-> [N, B]``."""
+        if inputs.dim() == 2:
+            inputs = inputs.unsqueeze(0).expand(self.n_critics, -1, -1)  # [N, B, in], no copy
+        return self.q_net(inputs).squeeze(-1)
 
 
 class POLAPolicy(BasePolicy):
