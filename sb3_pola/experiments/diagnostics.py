@@ -19,6 +19,7 @@ KEYS = [
     "target_q",
     "q_ensemble_std",
     "policy_q_ensemble_std",
+    "critic_similarity",
     "bc_loss",
     "q_loss",
     "eta",
