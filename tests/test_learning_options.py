@@ -9,7 +9,7 @@ import pytest
 import torch as th
 from helpers import light_kwargs, model_on_dataset
 
-from sb3_pola import POLA
+from sb3_pola import PAPER_FORM, POLA
 from sb3_pola.common.datasets import synthetic_dataset
 from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.dynamics_trainer import DynamicsTrainer
@@ -160,7 +160,8 @@ def test_disagreement_is_the_elites_spread():
 
 def test_uncertainty_cutoff_and_penalty(pendulum_path):
     dynamics = dict(n_members=3, n_elites=2, hidden_dim=16, n_layers=1)
-    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=2, dynamics_kwargs=dynamics))
+    kwargs = light_kwargs(rollout_length=2, dynamics_kwargs=dynamics, lookahead_normalization="first")
+    model = POLA("MlpPolicy", dataset=pendulum_path, **kwargs)
     model.learn(1)
     obs = model.replay_buffer.sample(16).observations
     feats = model.policy.actor_features(obs)
@@ -253,10 +254,10 @@ def test_predict_actor_online_uses_the_trained_actor(pendulum_path, tmp_path):
 
 
 # ---------------------------------------------------------------- the paper's form (default) and the weakened one
-def test_floor_and_weights_against_the_default_paper_form(pendulum_path):
+def test_floor_and_weights_against_the_paper_form(pendulum_path):
     """The weakened form: the look-ahead sum divided by sum gamma^i, and |Q| floored at mean|r| / (1 - gamma).
 
-    With a critic that returns the same small Q everywhere, the default (paper's) form gives
+    With a critic that returns the same small Q everywhere, the paper's form gives
     ``-sum_i gamma^i`` (3.94 at T = 3); the weakened form gives ``-Q / floor``, as at T = 0.
     """
     options = dict(lookahead_normalization="weights", q_scale_floor="auto")
@@ -271,9 +272,39 @@ def test_floor_and_weights_against_the_default_paper_form(pendulum_path):
     obs = model.replay_buffer.sample(8).observations
     loss, _ = model._lookahead_q_loss(obs, model.policy.actor_features(obs))
     assert loss.item() == pytest.approx(-constant / floor)
-    paper = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=3))  # the defaults
+    paper = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=3, **PAPER_FORM))
     paper.learn(1)
     paper._termination_fn = model._termination_fn
     paper.critic.forward = model.critic.forward  # type: ignore[method-assign]
     paper_loss, _ = paper._lookahead_q_loss(obs, paper.policy.actor_features(obs))
     assert paper_loss.item() == pytest.approx(-sum(paper.gamma**i for i in range(4)))
+
+
+# ---------------------------------------------------------------- the defaults chosen by issue #12's measurements
+def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_path):
+    """The four departures of 2026-12-02 (docs/results.md); ``**PAPER_FORM`` restores the paper's form."""
+    default = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs())
+    paper = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(**PAPER_FORM))
+    assert PAPER_FORM == {
+        "lookahead_normalization": "first",
+        "q_scale_floor": None,
+        "critic_diversity": 0.0,
+        "backprop_through_model": True,
+    }
+    for key, paper_value in PAPER_FORM.items():
+        assert getattr(paper, key) == paper_value
+        assert getattr(default, key) != paper_value, key
+    assert (default.lookahead_normalization, default.q_scale_floor) == ("weights", "auto")
+    assert (default.critic_diversity, default.backprop_through_model) == (1.0, False)
+    # in the update: the similarity term is on by default, off in the paper's form
+    for model, on in ((default, True), (paper, False)):
+        model.learn(1)
+        assert ("critic_similarity" in model._update(model.replay_buffer.sample(32))) == on
+
+
+def test_main_job_keeps_the_papers_form():
+    """The shipped InvertedPendulum main job needs the paper's strong, early Q term (docs/results.md)."""
+    from sb3_pola.experiments.run import CONFIGS
+
+    for config in CONFIGS.values():
+        assert {key: config[key] for key in PAPER_FORM} == PAPER_FORM

@@ -129,7 +129,7 @@ def reference_step(model, policy, batch) -> dict[str, object]:
             term = th.maximum(term, (doubt.detach() > model.lookahead_uncertainty_cutoff).float())
         penalties.append((alive * doubt).mean())
         alive = alive * (1.0 - term)
-        state = next_state
+        state = next_state if model.backprop_through_model else next_state.detach()
         action = ref_sample(actor, feats(state))
     scale = terms[0][0].abs().mean().detach().clamp_min(max(model.q_scale_floor_value or 0.0, 1e-6))
     weights = [model.gamma**i for i in range(model.rollout_length + 1)]

@@ -54,14 +54,15 @@ import numpy as np
 
 from sb3_pola.common.scores import success_rate, update_success
 from sb3_pola.experiments.diagnostics import write_diagnostics
+from sb3_pola.pola.pola import PAPER_FORM
 
 if TYPE_CHECKING:
     from sb3_pola.experiments.storage import Workspace
 
 # ----------------------------------------------------------------------------------------- variants
 
-# POLA arguments of the paper's form of the Q term (the defaults), and of the weakened form of issue #12
-PAPER_FORM: dict[str, Any] = {"lookahead_normalization": "first", "q_scale_floor": None}
+# POLA arguments of the weakened Q term of issue #12 (part of the defaults since 2026-12-02; the paper's form, the
+# defaults before, is sb3_pola.PAPER_FORM)
 FLOOR_FORM: dict[str, Any] = {"lookahead_normalization": "weights", "q_scale_floor": "auto"}
 
 # name -> (label for legends, POLA keyword arguments, policy_kwargs)
@@ -166,7 +167,22 @@ class Config:
         data = {k: v for k, v in asdict(self).items() if k not in ("preset", "log_interval")}
         if data["eval_rule"] == "ema":  # the rule before it was a field: folders made then keep their signature
             del data["eval_rule"]
+        # POLA's defaults where they depart from the paper's form (since 2026-12-02): a folder made under the old
+        # defaults (the paper's form) keeps its signature, and cannot be resumed with the new ones by mistake
+        changed = {key: value for key, value in pola_defaults(PAPER_FORM).items() if value != PAPER_FORM[key]}
+        if changed:
+            data["pola_defaults"] = changed
         return hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
+
+
+def pola_defaults(keys: Any) -> dict[str, Any]:
+    """The defaults of these ``POLA`` arguments."""
+    import inspect
+
+    from sb3_pola.pola import POLA
+
+    parameters = inspect.signature(POLA.__init__).parameters
+    return {key: parameters[key].default for key in keys}
 
 
 PRESETS: dict[str, Config] = {
@@ -404,11 +420,7 @@ def dynamics_path(out: pathlib.Path, dataset: str, seed: int, config: Config) ->
 
 def needs_dynamics(variant: str, config: Config) -> bool:
     """Whether a variant's model has a dynamics model to fit (a look-ahead, ``rollout_length > 0``)."""
-    import inspect
-
-    from sb3_pola.pola import POLA
-
-    default = inspect.signature(POLA.__init__).parameters["rollout_length"].default
+    default = pola_defaults(["rollout_length"])["rollout_length"]
     return int(pola_kwargs({**config.extra, **VARIANTS[variant][1]}).get("rollout_length", default)) > 0
 
 
