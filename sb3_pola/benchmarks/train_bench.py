@@ -19,9 +19,12 @@ import torch as th
 
 from sb3_pola.benchmarks.common import TASK_SIZES, count_flops, make_pola, matmul_replay, synchronize
 from sb3_pola.common.datasets import synthetic_dataset
+from sb3_pola.pola.pola import PAPER_FORM
 
-# the paper's configuration (N=10 critics, T=3 look-ahead steps, 5 diffusion steps, state products, batch 256)
+# the paper's configuration (N=10 critics, T=3 look-ahead steps, 5 diffusion steps, state products, batch 256),
+# in the paper's form (the package defaults' similarity term and detached states change the work per step)
 PAPER: dict[str, Any] = {
+    **PAPER_FORM,
     "n_critics": 10,
     "rollout_length": 3,
     "n_diffusion_steps": 5,
