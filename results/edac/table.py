@@ -1,4 +1,4 @@
-"""#12: the critic-diversity runs next to the 10k grid, the detached-states runs and the d3rlpy baselines.
+"""#12: the critic-diversity runs next to the 10k grid, the detached-states runs and the d3rlpy baselines; Hopper.
 
 Final score (step 10,000) per cell, mean ± sample std over seeds with every seed listed, from the cells'
 ``scores.csv`` (noise-free chain, the run's own evaluation) and, where present, ``reeval.csv`` (rule
@@ -27,6 +27,14 @@ SOURCES = [
     ("d3rlpy-TD3+BC", "peers10k", "d3rlpy-TD3+BC"),
     ("d3rlpy-IQL", "peers10k", "d3rlpy-IQL"),
     ("d3rlpy-BC", "peers10k", "d3rlpy-BC"),
+]
+# our Hopper-v5 medium dataset (results/hopper/collect.sh): the defaults before 2026-12-02 (the paper's form, the
+# CPU preset) against the new ones (the weakened Q term, critic_diversity 1, detached states), and BC
+HOPPER = [
+    ("BC", "hopper/score", "BC"),
+    ("T3, the paper's form (the defaults before)", "hopper/score", "T3"),
+    ("T3, paper's form + critic_diversity 1 + detached", "hopper/paper_edac_detached", "T3"),
+    ("T3, the new defaults", "hopper/floor_edac_detached", "T3"),
 ]
 
 
@@ -64,14 +72,15 @@ def cell(scores: dict[int, float]) -> str:
 def main() -> None:
     print("| dataset | variant | noise-free chain (seeds 0, 1, 2) | one sample (seeds 0, 1, 2) |")
     print("|---|---|---|---|")
-    for dataset in ("halfcheetah/medium-v0", "halfcheetah/medium-replay-v0"):
-        for label, folder, variant in SOURCES:
+    groups = [("halfcheetah/medium-v0", SOURCES), ("halfcheetah/medium-replay-v0", SOURCES), ("hopper/medium-v0", HOPPER)]
+    for dataset, sources in groups:
+        for label, folder, variant in sources:
             base = ROOT / folder
             scores = finals(base / ("peers.csv" if variant.startswith("d3rlpy") else "scores.csv"), variant)
             if dataset not in scores:
                 continue
             one = stochastic(base, variant).get(dataset, {})
-            print(f"| {dataset.split('/')[1]} | {label} | {cell(scores[dataset])} | {cell(one)} |")
+            print(f"| {dataset} | {label} | {cell(scores[dataset])} | {cell(one)} |")
 
 
 if __name__ == "__main__":
