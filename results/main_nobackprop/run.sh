@@ -1,9 +1,3 @@
 #!/usr/bin/env bash
-# #12: the main job (shipped InvertedPendulum data, light config, paper form of the Q term) with the
-# look-ahead states detached from the actor; one output folder per seed.
-cd "$(dirname "$0")/../.."
-export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
-for seed in "$@"; do
-  .venv/bin/python -m sb3_pola.cli run --seed "$seed" --extra '{"backprop_through_model": false}' \
-    --out "results/main_nobackprop/seed$seed" > "results/main_nobackprop/seed$seed.log" 2>&1
-done
+# #12: the main job (paper's form) with the look-ahead states detached from the actor
+exec bash "$(dirname "$0")/../main_seeds.sh" results/main_nobackprop '{"backprop_through_model": false}' "$@"
