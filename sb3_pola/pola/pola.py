@@ -104,7 +104,8 @@ class POLA(OfflineAlgorithm):
     Reinforcement Learning". Each gradient step (``train``) does, on a batch from the dataset:
 
     1. critic: TD regression of every member of the ``n_critics`` ensemble on the pessimistic
-       target ``r + gamma (1 - done) min_j Q'_j(s', a')``, ``a'`` from the EMA actor (section IV);
+       target ``r + gamma (1 - done) min_j Q'_j(s', a')``, ``a'`` from the EMA actor (section IV), plus
+       ``critic_diversity`` times EDAC's ensemble similarity of the members' action gradients;
     2. actor: ``L_d + eta * L_q`` where ``L_d`` is the DDPM loss on dataset actions (eq. 6) and
        ``L_q`` the look-ahead loss (eq. 3, 4): the mean of the ``top_k`` smallest ensemble
        Q-values at the current state and at ``rollout_length`` states predicted by the dynamics
