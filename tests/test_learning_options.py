@@ -108,6 +108,10 @@ def test_ensemble_similarity_is_the_mean_pairwise_cosine():
     assert ensemble_similarity(same).item() == pytest.approx(4.0, abs=1e-5)  # N: every pair aligned
     opposed = th.stack([th.tensor([1.0, 0.0]), th.tensor([-1.0, 0.0])]).unsqueeze(1)  # [2, 1, 2]
     assert ensemble_similarity(opposed).item() == pytest.approx(-2.0, abs=1e-5)
+    # a member with a zero action gradient: a finite similarity and finite derivatives (g / |g| has NaN ones)
+    flat = th.cat([th.zeros(1, 9, 3), th.randn(3, 9, 3)]).requires_grad_(True)
+    ensemble_similarity(flat).backward()
+    assert flat.grad is not None and th.isfinite(flat.grad).all()
 
 
 def test_critic_diversity_decorrelates_the_members():
@@ -308,3 +312,22 @@ def test_main_job_keeps_the_papers_form():
 
     for config in CONFIGS.values():
         assert {key: config[key] for key in PAPER_FORM} == PAPER_FORM
+
+
+@pytest.mark.parametrize("compile_activations", [False, True])
+def test_critic_second_derivative_is_finite_at_large_activations(compile_activations):
+    """F.mish's second derivative is NaN above about 90; the critic's Mish under eager_activations is not."""
+    from torch.nn import functional as F
+
+    from sb3_pola.common.activations import FusedMish, TwiceDifferentiableMish, eager_activations
+
+    x = th.tensor([-200.0, -30.0, 0.0, 30.0, 95.0, 200.0], requires_grad=True)
+    (g,) = th.autograd.grad(F.mish(x).sum(), x, create_graph=True)
+    assert not th.isfinite(th.autograd.grad(g.sum(), x)[0]).all()  # the failure this guards against
+    module = FusedMish() if compile_activations else TwiceDifferentiableMish()
+    with eager_activations():
+        y = module(x)
+        (g,) = th.autograd.grad(y.sum(), x, create_graph=True)
+        (h,) = th.autograd.grad(g.sum(), x)
+    assert th.allclose(y, F.mish(x)) and th.isfinite(h).all()
+    assert th.allclose(TwiceDifferentiableMish()(x), F.mish(x))  # outside the block: F.mish itself

@@ -94,7 +94,7 @@ def reference_step(model, policy, batch) -> dict[str, object]:
                 th.cat(th.autograd.grad(q[i].sum(), (member_feats[i], member_actions[i]), create_graph=True), dim=-1)
                 for i in range(n)
             ]
-        units = [g / (g.norm(dim=-1, keepdim=True) + 1e-10) for g in grads]
+        units = [g / (g.pow(2).sum(dim=-1, keepdim=True) + 1e-12).sqrt() for g in grads]
         pairs = sum((units[i] * units[j]).sum(dim=-1) for i in range(n) for j in range(n) if i != j)
         critic_loss = critic_loss + model.critic_diversity * pairs.mean() / (n - 1)
     critic.optimizer.zero_grad()

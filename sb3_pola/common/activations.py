@@ -40,8 +40,9 @@ _eager_depth = 0
 
 @contextlib.contextmanager
 def eager_activations() -> Iterator[None]:
-    """``F.mish`` inside this block: for graphs that are differentiated twice (``create_graph=True``), which a
-    compiled kernel's backward does not support."""
+    """Mish as plain differentiable operations (:func:`mish_exp`) inside this block: for graphs that are
+    differentiated twice (``create_graph=True``), which a compiled kernel's backward does not support and where
+    ``F.mish``'s second derivative overflows."""
     global _eager_depth
     _eager_depth += 1
     try:
@@ -57,7 +58,9 @@ def compiled_mish(x: th.Tensor) -> th.Tensor:
         return mish_exp(x)
     # eager for small tensors, and under a dispatch mode (FLOP counters, profilers' modes), which would make
     # dynamo recompile for every mode until its cache limit, after which it runs mish_exp unfused
-    if _failed or _eager_depth or x.numel() < MIN_COMPILED_NUMEL or _get_current_dispatch_mode() is not None:
+    if _eager_depth:  # differentiated twice: the one-exp form, whose second derivative stays finite
+        return mish_exp(x)
+    if _failed or x.numel() < MIN_COMPILED_NUMEL or _get_current_dispatch_mode() is not None:
         return F.mish(x)
     if _compiled is None:
         _compiled = th.compile(mish_exp, dynamic=True)
@@ -76,9 +79,32 @@ class FusedMish(nn.Module):
         return compiled_mish(x)
 
 
+class TwiceDifferentiableMish(nn.Module):
+    """``nn.Mish`` (``F.mish``), except inside :func:`eager_activations`, where it is :func:`mish_exp`: the second
+    derivative of ``F.mish`` overflows to NaN for inputs above about 90 (0 * inf), which diverged long runs of the
+    critic's similarity term; ``mish_exp`` clamps its ``exp``."""
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        return mish_exp(x) if _eager_depth else F.mish(x)
+
+
+def twice_differentiable(activation_fn: type[nn.Module]) -> type[nn.Module]:
+    """The counterpart of an activation class that is safe to differentiate twice (``nn.Mish``), else the class."""
+    return TwiceDifferentiableMish if activation_fn is nn.Mish else activation_fn
+
+
 def fused_activation(activation_fn: type[nn.Module]) -> type[nn.Module]:
     """The compiled counterpart of an activation class where one exists (``nn.Mish``), else the class itself."""
     return FusedMish if activation_fn is nn.Mish else activation_fn
 
 
-__all__: list[str] = ["EXP_CLAMP", "FusedMish", "compiled_mish", "eager_activations", "fused_activation", "mish_exp"]
+__all__: list[str] = [
+    "EXP_CLAMP",
+    "FusedMish",
+    "TwiceDifferentiableMish",
+    "compiled_mish",
+    "eager_activations",
+    "fused_activation",
+    "mish_exp",
+    "twice_differentiable",
+]

@@ -14,7 +14,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 from torch.nn import functional as F
 
-from sb3_pola.common.activations import fused_activation
+from sb3_pola.common.activations import fused_activation, twice_differentiable
 from sb3_pola.common.diffusion import NoiseSchedule
 from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.torch_layers import SinusoidalPosEmb, StateProductsExtractor, vectorized_mlp
@@ -262,7 +262,9 @@ class POLAPolicy(BasePolicy):
         )
         self.actor_ema = copy.deepcopy(self.actor).requires_grad_(False)
         critic_features = StateProductsExtractor(observation_space, use_state_products=critic_state_products)
-        self.critic = EnsembleCritic(critic_features, action_dim, critic_arch, n_critics, net_activation)
+        # the critic's similarity term differentiates it twice: Mish in a form whose second derivative is finite
+        critic_activation = net_activation if compile_activations else twice_differentiable(activation_fn)
+        self.critic = EnsembleCritic(critic_features, action_dim, critic_arch, n_critics, critic_activation)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
         self.critic_target.train(False)
         self.actor_ema.train(False)
