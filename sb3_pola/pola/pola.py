@@ -63,7 +63,7 @@ def ensemble_similarity(q_action_grads: th.Tensor) -> th.Tensor:
     :return: the similarity, a scalar in ``[-N / (N - 1), N]`` (``N``: all members alike)
     """
     n_members = q_action_grads.shape[0]
-    # g / sqrt(|g|^2 + eps): smooth at g = 0, where g / |g| has a NaN derivative (it diverged long runs)
+    # g / sqrt(|g|^2 + eps): unit length, smooth and bounded at g = 0
     unit = q_action_grads * (q_action_grads.pow(2).sum(dim=-1, keepdim=True) + 1e-12).rsqrt()  # [N, B, A]
     # sum_{i != j} <u_i, u_j> = |sum_i u_i|^2 - sum_i |u_i|^2, without the [B, N, N] Gram matrix
     pairs = unit.sum(dim=0).pow(2).sum(dim=-1) - unit.pow(2).sum(dim=(0, 2))  # [B]
