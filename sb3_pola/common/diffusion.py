@@ -40,6 +40,9 @@ BETA_SCHEDULES: dict[str, Callable[[int], th.Tensor]] = {
 }
 
 
+PREDICTION_TYPES = ("epsilon", "sample")
+
+
 class NoiseSchedule(nn.Module):
     """DDPM forward (``add_noise``) and reverse (``step``) process over ``n_steps`` diffusion steps.
 
@@ -48,16 +51,21 @@ class NoiseSchedule(nn.Module):
 
     :param n_steps: number of diffusion steps (Diffusion-QL and POLA: 5)
     :param beta_schedule: ``"vp"``, ``"linear"`` or ``"cosine"``
+    :param prediction_type: what the network predicts: ``"epsilon"``, the noise (eq. 2 / 6, DDPM), or
+        ``"sample"``, the clean action ``x_0`` (Diffuser's and Diffusion-QL's ``predict_epsilon=False``)
     """
 
-    def __init__(self, n_steps: int = 5, beta_schedule: str = "vp") -> None:
+    def __init__(self, n_steps: int = 5, beta_schedule: str = "vp", prediction_type: str = "epsilon") -> None:
         super().__init__()
         if beta_schedule not in BETA_SCHEDULES:
             raise ValueError(f"Unknown beta_schedule {beta_schedule!r}; choose one of {sorted(BETA_SCHEDULES)}")
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        if prediction_type not in PREDICTION_TYPES:
+            raise ValueError(f"Unknown prediction_type {prediction_type!r}; choose one of {PREDICTION_TYPES}")
         self.n_steps = n_steps
         self.beta_schedule = beta_schedule
+        self.prediction_type = prediction_type
 
         betas = BETA_SCHEDULES[beta_schedule](n_steps)  # float64 for exact coefficients, stored as float32
         alphas = 1.0 - betas
@@ -85,12 +93,14 @@ class NoiseSchedule(nn.Module):
         coefficients["noise_std"] = noise_std
         for name, value in coefficients.items():
             self.register_buffer(name, value.float(), persistent=False)
-        # per step (sqrt(1/abar_t), sqrt(1/abar_t - 1), posterior mean coefficients c1, c2, sigma_t) as Python
-        # floats, for the fast chains (sb3_pola.pola.fast_sampling, export): constants of a compiled graph
+        # per step (r_t, m_t, posterior mean coefficients c1, c2, sigma_t) as Python floats, for the fast chains
+        # (sb3_pola.pola.fast_sampling, export): constants of a compiled graph. The clean-action estimate is
+        # x_0 = r_t x_t - m_t out: (sqrt(1/abar_t), sqrt(1/abar_t - 1)) when out is the noise, (0, -1) when out is x_0
+        sample = prediction_type == "sample"
         self.step_constants: list[tuple[float, float, float, float, float]] = [
             (
-                float(self.sqrt_recip_alphas_cumprod[t]),
-                float(self.sqrt_recipm1_alphas_cumprod[t]),
+                0.0 if sample else float(self.sqrt_recip_alphas_cumprod[t]),
+                -1.0 if sample else float(self.sqrt_recipm1_alphas_cumprod[t]),
                 float(self.posterior_mean_coef1[t]),
                 float(self.posterior_mean_coef2[t]),
                 float(self.noise_std[t]),
@@ -148,12 +158,12 @@ class NoiseSchedule(nn.Module):
         noise: th.Tensor | None,
         clip: float | None = 1.0,
     ) -> th.Tensor:
-        """One reverse step ``x_t -> x_{t-1}`` (eq. 5) from the predicted noise.
+        """One reverse step ``x_t -> x_{t-1}`` (eq. 5) from the network's output (the noise, or ``x_0``).
 
         The predicted ``x_0`` is clipped to ``[-clip, clip]`` (the action bounds) before the
         posterior mean is formed, as in Diffusion-QL. ``noise=None`` gives the posterior mean.
         """
-        x0 = self.predict_start_from_noise(x_t, t, model_output)
+        x0 = model_output if self.prediction_type == "sample" else self.predict_start_from_noise(x_t, t, model_output)
         if clip is not None:
             x0 = x0.clamp(-clip, clip)
         mean, _ = self.q_posterior(x0, x_t, t)
@@ -162,4 +172,4 @@ class NoiseSchedule(nn.Module):
         return mean + self.noise_std[t] * noise
 
     def extra_repr(self) -> str:
-        return f"n_steps={self.n_steps}, beta_schedule={self.beta_schedule!r}"
+        return f"n_steps={self.n_steps}, beta_schedule={self.beta_schedule!r}, prediction_type={self.prediction_type!r}"

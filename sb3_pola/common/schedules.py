@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 
 class WarmupSchedule:
     """``0`` for the first ``warmup`` fraction of ``learn``, then a linear ramp to ``value`` over ``ramp``, then ``value``.
@@ -35,3 +37,31 @@ class WarmupSchedule:
 def warmup_schedule(value: float, warmup: float = 0.1, ramp: float = 0.1) -> WarmupSchedule:
     """:class:`WarmupSchedule` (SB3 style factory)."""
     return WarmupSchedule(value, warmup, ramp)
+
+
+class CosineSchedule:
+    """Cosine decay from ``initial`` to ``final`` over ``learn`` (Diffusion-QL's learning-rate decay).
+
+    Called with the remaining progress (1 at the start of ``learn``, 0 at the end), as SB3's schedules are:
+    ``final + (initial - final) (1 + cos(pi done)) / 2`` with ``done = 1 - progress_remaining``.
+
+    :param initial: the value at the start
+    :param final: the value at the end
+    """
+
+    def __init__(self, initial: float, final: float = 0.0) -> None:
+        if initial < 0 or final < 0:
+            raise ValueError(f"initial and final must be >= 0, got {initial} and {final}")
+        self.initial, self.final = float(initial), float(final)
+
+    def __call__(self, progress_remaining: float) -> float:
+        done = min(max(1.0 - progress_remaining, 0.0), 1.0)
+        return self.final + (self.initial - self.final) * 0.5 * (1.0 + math.cos(math.pi * done))
+
+    def __repr__(self) -> str:
+        return f"CosineSchedule(initial={self.initial}, final={self.final})"
+
+
+def cosine_schedule(initial: float, final: float = 0.0) -> CosineSchedule:
+    """:class:`CosineSchedule` (SB3 style factory)."""
+    return CosineSchedule(initial, final)

@@ -50,12 +50,20 @@ def vectorized_mlp(
     net_arch: list[int],
     ensemble_size: int,
     activation_fn: type[nn.Module] = nn.ReLU,
+    layer_norm: bool = False,
 ) -> nn.Sequential:
-    """An ensemble of MLPs ``in_dim -> net_arch -> out_dim``, all members in one set of batched matmuls."""
+    """An ensemble of MLPs ``in_dim -> net_arch -> out_dim``, all members in one set of batched matmuls.
+
+    ``layer_norm``: a LayerNorm (no affine parameters, so the members stay independent) before each hidden
+    activation; it bounds the features, and so the output, off the data (ReBRAC's and RLPD's critics).
+    """
     layers: list[nn.Module] = []
     last = in_dim
     for width in net_arch:
-        layers += [VectorizedLinear(last, width, ensemble_size), activation_fn()]
+        layers.append(VectorizedLinear(last, width, ensemble_size))
+        if layer_norm:
+            layers.append(nn.LayerNorm(width, elementwise_affine=False))
+        layers.append(activation_fn())
         last = width
     layers.append(VectorizedLinear(last, out_dim, ensemble_size))
     return nn.Sequential(*layers)

@@ -188,6 +188,7 @@ def sample_no_grad(
     generator: th.Generator | None = None,
     deterministic: bool = False,
     copy_weights: bool = False,
+    noise: th.Tensor | None = None,
 ) -> th.Tensor:
     """:meth:`DiffusionActor.sample` without autograd, through an :class:`InferencePlan` of the current weights.
 
@@ -197,11 +198,13 @@ def sample_no_grad(
     :param deterministic: the noise-free chain from ``a_T = 0``
     :param copy_weights: build the plan with contiguous copies of the weights (see :func:`inference_plan`);
         ``False``: the cached plan of views (:func:`cached_view_plan`)
+    :param noise: ``[n + 1, B, A]`` the chain's noise (``a_T`` last), given instead of drawn
     :return: ``[B, A]`` actions in ``[-1, 1]``
     """
     with th.no_grad():
         plan = inference_plan(actor, copy_weights=True) if copy_weights else cached_view_plan(actor)
-        noise = chain_noise(actor, features, generator, deterministic)
+        if noise is None:
+            noise = chain_noise(actor, features, generator, deterministic)
         if features.shape[0] <= INFERENCE_CHUNK:
             return _run_plan(plan, features, noise)
         # rows are independent: chunks keep every temporary in cache

@@ -37,6 +37,7 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
+GRADIENT_RATIO_FREQ = 100  # gradient steps between two measurements of train/q_bc_grad_ratio
 # the paper's form of the Q term and critic (eq. 3/4 as written, Diffusion-QL's divisor, no ensemble-similarity
 # term, the actor's gradient through the model): POLA(..., **PAPER_FORM); four defaults depart from it (docstring)
 PAPER_FORM: dict[str, Any] = {
@@ -77,6 +78,7 @@ def lookahead_q_objective(
     top_k: int,
     normalization: str = "first",
     q_scale_floor: float = 0.0,
+    lcb_coef: float | None = None,
 ) -> tuple[th.Tensor, th.Tensor]:
     """``L_q`` of eq. 4 (eq. 3 with the ensemble's top-K) from the ensemble's Q-values along the look-ahead.
 
@@ -88,9 +90,14 @@ def lookahead_q_objective(
         weighs ``sum_i gamma^i`` (about ``T + 1``) times its ``T = 0`` weight; ``"weights"``: the weights
         divided by their sum, so ``eta`` means the same for every ``T``
     :param q_scale_floor: lower bound of the divisor ``mean |Q|`` (``0``: Diffusion-QL's plain batch mean)
-    :return: the loss and the ``[T+1]`` mean top-K Q per step (masked)
+    :param lcb_coef: ``k`` of a lower confidence bound ``mean_j Q_j - k std_j Q_j`` over the members in place of
+        the top-K mean (SAC-N / DAC): pessimism that grows with the members' disagreement; ``None``: top-K (eq. 4)
+    :return: the loss and the ``[T+1]`` pessimistic Q per step (masked)
     """
-    q_top_k = q.topk(top_k, dim=0, largest=False).values.mean(dim=0)  # [T+1, B]: mean of the K smallest members
+    if lcb_coef is None:
+        q_top_k = q.topk(top_k, dim=0, largest=False).values.mean(dim=0)  # [T+1, B]: mean of the K smallest members
+    else:
+        q_top_k = q.mean(dim=0) - lcb_coef * q.std(dim=0)  # [T+1, B]
     per_step = (alive * q_top_k).mean(dim=1)  # [T+1]
     # scale-free Q term (Diffusion-QL): divide by the detached mean |Q| at the current states
     q_scale = q_top_k[0].abs().mean().detach().clamp_min(max(q_scale_floor, 1e-6))
@@ -176,12 +183,16 @@ class POLA(OfflineAlgorithm):
         predicted consequences the model is unsure of. ``0``: off (the paper)
     :param lookahead_uncertainty_cutoff: look-ahead states reached through a step with disagreement above
         this value contribute no Q term, and neither do later ones (as a terminal state). ``None``: off
+    :param lcb_coef: ``k`` of a lower confidence bound ``mean - k std`` over the ensemble used in the policy loss
+        in place of the mean of the ``top_k`` smallest members (:func:`lookahead_q_objective`). ``None``: top-K
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False`` (default):
         look-ahead states are detached, so each Q term only trains the action taken at its state: the actor
         still learns at the states its own actions lead to, but cannot move them to please the critic.
     :param n_diffusion_steps: denoising steps of the diffusion actor
     :param beta_schedule: noise schedule: ``"vp"`` (default), ``"linear"`` or ``"cosine"``
+    :param prediction_type: the actor network's target: ``"epsilon"``, the noise (eq. 6 as written), or
+        ``"sample"``, the clean action (:class:`~sb3_pola.pola.policies.DiffusionActor`)
     :param use_state_products: give the actor the pairwise state products (section V)
     :param max_grad_norm: gradient-norm clipping of actor and critic (``None`` disables it)
     :param ema_decay: decay of the EMA actor used for targets and ``predict``
@@ -230,9 +241,11 @@ class POLA(OfflineAlgorithm):
         critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
+        lcb_coef: float | None = None,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
+        prediction_type: str = "epsilon",
         use_state_products: bool = True,
         max_grad_norm: float | None = 1.0,
         ema_decay: float = 0.995,
@@ -284,6 +297,8 @@ class POLA(OfflineAlgorithm):
             )
         if critic_diversity > 0 and n_critics < 2:
             raise ValueError("critic_diversity needs n_critics >= 2")
+        if lcb_coef is not None and (lcb_coef < 0 or n_critics < 2):
+            raise ValueError(f"lcb_coef must be None or >= 0 with n_critics >= 2, got {lcb_coef} (n_critics={n_critics})")
         if lookahead_uncertainty_penalty < 0:
             raise ValueError(f"lookahead_uncertainty_penalty must be >= 0, got {lookahead_uncertainty_penalty}")
         self.n_critics = n_critics
@@ -298,9 +313,11 @@ class POLA(OfflineAlgorithm):
         self.critic_diversity_inputs = critic_diversity_inputs
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
         self.lookahead_uncertainty_cutoff = lookahead_uncertainty_cutoff
+        self.lcb_coef = lcb_coef
         self.backprop_through_model = backprop_through_model
         self.n_diffusion_steps = n_diffusion_steps
         self.beta_schedule = beta_schedule
+        self.prediction_type = prediction_type
         self.use_state_products = use_state_products
         self.max_grad_norm = max_grad_norm
         self.ema_decay = ema_decay
@@ -331,6 +348,7 @@ class POLA(OfflineAlgorithm):
             n_critics=self.n_critics,
             n_diffusion_steps=self.n_diffusion_steps,
             beta_schedule=self.beta_schedule,
+            prediction_type=self.prediction_type,
             use_state_products=self.use_state_products,
             dynamics_kwargs=dynamics_kwargs,
             **self.policy_kwargs,
@@ -439,6 +457,8 @@ class POLA(OfflineAlgorithm):
             decay = self.ema_decay if step >= self.ema_start else 0.0
             _lerp_params(self.actor.parameters(), self.policy.actor_ema.parameters(), 1.0 - decay)
         _lerp_params(self.critic.parameters(), self.critic_target.parameters(), self.tau)
+        if step % GRADIENT_RATIO_FREQ == 0 and not self._behaviour_cloning:
+            self.logger.record_mean("train/q_bc_grad_ratio", self.q_bc_gradient_ratio(obs, actions))
 
         # losses first: a divergence message names the first few non-finite statistics
         return {
@@ -449,6 +469,21 @@ class POLA(OfflineAlgorithm):
             "critic_grad_norm": critic_grad_norm,
             "actor_grad_norm": actor_grad_norm,
         }
+
+    def q_bc_gradient_ratio(self, obs: th.Tensor, actions: th.Tensor) -> float:
+        """``|grad eta L_q| / |grad L_d|`` over the actor's parameters at this step's ``eta``: how hard the Q term
+        pulls against imitation. Eager, on its own draws (the training's random stream is left untouched)."""
+        params = [p for p in self.actor.parameters() if p.requires_grad]
+        with th.random.fork_rng(devices=[self.device] if self.device.type == "cuda" else []), self._critic_frozen():
+            features = self.policy.actor_features(obs)
+            bc_grads = th.autograd.grad(self.actor.loss(actions, features), params, allow_unused=True)
+            q_loss, _ = self._lookahead_q_loss(obs, features)
+            q_grads = th.autograd.grad(self._eta_value * q_loss, params, allow_unused=True)
+
+        def norm(grads: tuple[th.Tensor | None, ...]) -> th.Tensor:
+            return th.linalg.vector_norm(th.stack([th.linalg.vector_norm(g) for g in grads if g is not None]))
+
+        return float(norm(q_grads) / norm(bc_grads).clamp_min(1e-12))
 
     @contextlib.contextmanager
     def _critic_frozen(self) -> Iterator[None]:
@@ -546,6 +581,7 @@ class POLA(OfflineAlgorithm):
             self.top_k,
             normalization=self.lookahead_normalization,
             q_scale_floor=self.q_scale_floor_value or 0.0,
+            lcb_coef=self.lcb_coef,
         )
         stats = {f"lookahead_q_{i}": per_step[i].detach() for i in range(horizon + 1)}
         stats["action_saturation"] = saturation

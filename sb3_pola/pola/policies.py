@@ -35,6 +35,10 @@ class DiffusionActor(nn.Module):
     :param beta_schedule: ``"vp"``, ``"linear"`` or ``"cosine"``
     :param time_embedding_dim: size of the sinusoidal time embedding
     :param activation_fn: activation (Mish in Diffusion-QL)
+    :param prediction_type: the network's target: ``"epsilon"``, the noise (eq. 6 as written), or ``"sample"``,
+        the clean action (Diffuser's ``predict_epsilon=False``). Under epsilon-prediction the clean-action
+        estimate at the noisiest steps divides the network's error by ``sqrt(abar_t)``, small there, while the
+        loss weighs those steps least; predicting ``a_0`` makes the noisiest step a plain regressor of the action
     """
 
     optimizer: th.optim.Optimizer
@@ -49,12 +53,13 @@ class DiffusionActor(nn.Module):
         beta_schedule: str = "vp",
         time_embedding_dim: int = 16,
         activation_fn: type[nn.Module] = nn.Mish,
+        prediction_type: str = "epsilon",
     ) -> None:
         super().__init__()
         self.features_dim = features_dim
         self.action_dim = action_dim
         self.time_embedding_dim = time_embedding_dim
-        self.schedule = NoiseSchedule(n_diffusion_steps, beta_schedule)
+        self.schedule = NoiseSchedule(n_diffusion_steps, beta_schedule, prediction_type)
         self.time_mlp = nn.Sequential(
             SinusoidalPosEmb(time_embedding_dim),
             nn.Linear(time_embedding_dim, 2 * time_embedding_dim),
@@ -73,18 +78,25 @@ class DiffusionActor(nn.Module):
     def n_diffusion_steps(self) -> int:
         return self.schedule.n_steps
 
+    @property
+    def prediction_type(self) -> str:
+        return self.schedule.prediction_type
+
     def predict_noise(self, x_t: th.Tensor, t: th.Tensor, features: th.Tensor) -> th.Tensor:
-        """``eps_theta(x_t, s_new, t)`` for a batch with per-sample steps ``t`` [B]."""
+        """The network's output for a batch with per-sample steps ``t`` [B]: ``eps_theta(x_t, s_new, t)``, or the
+        clean action under ``prediction_type="sample"``."""
         # [B, A + time + F] -> [B, A]
         return self.trunk(self.input_layer(th.cat((x_t, self.time_mlp(t), features), dim=-1)))
 
     def loss(self, actions: th.Tensor, features: th.Tensor) -> th.Tensor:
-        """Behaviour-cloning loss ``L_d`` (eq. 6): noise-prediction MSE at a uniformly drawn step."""
+        """Behaviour-cloning loss ``L_d`` (eq. 6): noise-prediction MSE at a uniformly drawn step (or the clean
+        action's MSE under ``prediction_type="sample"``)."""
         t = th.randint(0, self.n_diffusion_steps, (actions.shape[0],), device=actions.device)
         noise = th.randn_like(actions)
         x_t = self.schedule.add_noise(actions, noise, t)
-        # eq. 6: || eps - eps_theta(sqrt(abar_t) a + sqrt(1 - abar_t) eps, s_new, t) ||^2
-        return F.mse_loss(self.predict_noise(x_t, t, features), noise)
+        # eq. 6: || eps - eps_theta(sqrt(abar_t) a + sqrt(1 - abar_t) eps, s_new, t) ||^2 (a in place of eps for x0)
+        target = actions if self.prediction_type == "sample" else noise
+        return F.mse_loss(self.predict_noise(x_t, t, features), target)
 
     def sample(self, features: th.Tensor, generator: th.Generator | None = None, deterministic: bool = False) -> th.Tensor:
         """Draw actions with the reverse chain (eq. 5), differentiable w.r.t. the parameters and ``features``.
@@ -102,10 +114,10 @@ class DiffusionActor(nn.Module):
         # a_T ~ N(0, I) (0 for the deterministic chain)
         x = th.zeros(shape[1:], device=features.device, dtype=features.dtype) if noise is None else noise[-1]
         for t in reversed(range(self.n_diffusion_steps)):
-            eps = self.predict_noise(x, self.step_indices[t].expand(batch_size), features)
+            out = self.predict_noise(x, self.step_indices[t].expand(batch_size), features)
             # eq. 5: a_{t-1} = mean(a_t, eps_theta(a_t, s_new, t)) + sigma_t z, the mean formed from the predicted a_0
             # clipped to [-1, 1] (Diffusion-QL; the paper's mean without the clip); no noise at the last step
-            x = self.schedule.step(eps, t, x, None if noise is None else noise[t])
+            x = self.schedule.step(out, t, x, None if noise is None else noise[t])
         return x.clamp(-1.0, 1.0)
 
 
@@ -117,6 +129,7 @@ class EnsembleCritic(nn.Module):
     :param net_arch: hidden layer sizes of every member
     :param n_critics: ensemble size ``N``
     :param activation_fn: activation
+    :param layer_norm: LayerNorm before every hidden activation (bounds Q off the data)
     """
 
     optimizer: th.optim.Optimizer
@@ -128,11 +141,13 @@ class EnsembleCritic(nn.Module):
         net_arch: list[int],
         n_critics: int = 10,
         activation_fn: type[nn.Module] = nn.Mish,
+        layer_norm: bool = False,
     ) -> None:
         super().__init__()
         self.features_extractor = features_extractor
         self.n_critics = n_critics
-        self.q_net = vectorized_mlp(features_extractor.features_dim + action_dim, 1, net_arch, n_critics, activation_fn)
+        in_dim = features_extractor.features_dim + action_dim
+        self.q_net = vectorized_mlp(in_dim, 1, net_arch, n_critics, activation_fn, layer_norm=layer_norm)
 
     def forward(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """Q-values of every member: ``[B, obs], [B, A] -> [N, B]``."""
@@ -168,8 +183,11 @@ class POLAPolicy(BasePolicy):
     :param n_critics: critic ensemble size ``N`` (paper: 10)
     :param n_diffusion_steps: denoising steps of the actor (paper and Diffusion-QL: 5)
     :param beta_schedule: noise schedule, ``"vp"``, ``"linear"`` or ``"cosine"``
+    :param prediction_type: the actor network's target, ``"epsilon"`` (the noise) or ``"sample"`` (the clean
+        action; :class:`DiffusionActor`)
     :param use_state_products: feed the actor ``s_new`` = state + all ``X_i X_j, i < j`` (paper section V)
     :param critic_state_products: also give the critics the products (the paper reports this hurts)
+    :param critic_layer_norm: LayerNorm in the critics' hidden layers, which bounds Q off the data (ReBRAC, RLPD)
     :param time_embedding_dim: size of the diffusion-step embedding
     :param n_action_samples: candidate actions per state in ``predict``
     :param predict_seed: seed of the candidates' noise in deterministic ``predict`` with ``n_action_samples > 1``
@@ -198,8 +216,10 @@ class POLAPolicy(BasePolicy):
         n_critics: int = 10,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
+        prediction_type: str = "epsilon",
         use_state_products: bool = True,
         critic_state_products: bool = False,
+        critic_layer_norm: bool = False,
         time_embedding_dim: int = 16,
         n_action_samples: int = 1,
         predict_seed: int = 0,
@@ -239,8 +259,10 @@ class POLAPolicy(BasePolicy):
         self.n_critics = n_critics
         self.n_diffusion_steps = n_diffusion_steps
         self.beta_schedule = beta_schedule
+        self.prediction_type = prediction_type
         self.use_state_products = use_state_products
         self.critic_state_products = critic_state_products
+        self.critic_layer_norm = critic_layer_norm
         self.time_embedding_dim = time_embedding_dim
         self.n_action_samples = n_action_samples
         self.predict_seed = predict_seed
@@ -259,12 +281,13 @@ class POLAPolicy(BasePolicy):
             beta_schedule=beta_schedule,
             time_embedding_dim=time_embedding_dim,
             activation_fn=net_activation,
+            prediction_type=prediction_type,
         )
         self.actor_ema = copy.deepcopy(self.actor).requires_grad_(False)
         critic_features = StateProductsExtractor(observation_space, use_state_products=critic_state_products)
         # the critic's similarity term differentiates it twice: Mish in a form whose second derivative is finite
         critic_activation = net_activation if compile_activations else twice_differentiable(activation_fn)
-        self.critic = EnsembleCritic(critic_features, action_dim, critic_arch, n_critics, critic_activation)
+        self.critic = EnsembleCritic(critic_features, action_dim, critic_arch, n_critics, critic_activation, critic_layer_norm)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
         self.critic_target.train(False)
         self.actor_ema.train(False)
@@ -286,8 +309,10 @@ class POLAPolicy(BasePolicy):
             n_critics=self.n_critics,
             n_diffusion_steps=self.n_diffusion_steps,
             beta_schedule=self.beta_schedule,
+            prediction_type=self.prediction_type,
             use_state_products=self.use_state_products,
             critic_state_products=self.critic_state_products,
+            critic_layer_norm=self.critic_layer_norm,
             time_embedding_dim=self.time_embedding_dim,
             n_action_samples=self.n_action_samples,
             predict_seed=self.predict_seed,
@@ -321,19 +346,32 @@ class POLAPolicy(BasePolicy):
         # the fast form of actor.sample (same function, float rounding aside): predict needs no gradient
         if n == 1:
             return sample_no_grad(actor, self.actor_features(obs), deterministic=deterministic)
-        generator = None
-        if deterministic:
-            generator = th.Generator(device=obs.device)
-            generator.manual_seed(self.predict_seed)
         batch_size = obs.shape[0]
         obs_rep = obs.repeat_interleave(n, dim=0)  # [B * n, obs]
-        actions = sample_no_grad(actor, self.actor_features(obs_rep), generator=generator)  # [B * n, A]
+        features = self.actor_features(obs_rep)
+        if deterministic:
+            noise = self.candidate_noise(actor).repeat(1, batch_size, 1)  # [steps + 1, B * n, A]
+            actions = sample_no_grad(actor, features, noise=noise)
+        else:
+            actions = sample_no_grad(actor, features)  # [B * n, A]
         q = self.critic_target(obs_rep, actions).min(dim=0).values.view(batch_size, n)  # [B, n]
         if deterministic:
             idx = q.argmax(dim=1)
         else:
             idx = th.multinomial(F.softmax(q, dim=1), 1).squeeze(1)
         return actions.view(batch_size, n, -1)[th.arange(batch_size, device=obs.device), idx]
+
+    def candidate_noise(self, actor: DiffusionActor) -> th.Tensor:
+        """``[steps + 1, n, A]``: the chain noise of the ``n`` candidates of a deterministic ``predict``, the same for
+        every state and batch size: candidate 0 is the noise-free chain (zeros), the others drawn with
+        ``predict_seed``. The best of them by the pessimistic critic is the action, so on unimodal data the choice
+        can stay at the noise-free action, and on mixed data it moves to a mode instead of the modes' mean."""
+        device = self.critic_target.q_net[0].weight.device
+        generator = th.Generator(device="cpu").manual_seed(self.predict_seed)
+        shape = (actor.n_diffusion_steps + 1, self.n_action_samples, actor.action_dim)
+        noise = th.randn(shape, generator=generator)
+        noise[:, 0] = 0.0
+        return noise.to(device)
 
     def set_training_mode(self, mode: bool) -> None:
         # targets and the EMA copy stay in eval mode; they have no dropout/batch-norm, so this is for clarity only.

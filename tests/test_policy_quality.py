@@ -1,0 +1,233 @@
+"""Issue #23's options for the policy's quality: x0-prediction, LayerNorm critics, a lower confidence bound in the
+policy loss, the Q-to-BC gradient ratio and the deterministic rule of ``predict`` (the best candidate by Q)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch as th
+from helpers import light_kwargs, model_on_dataset
+
+from sb3_pola.common.datasets import synthetic_dataset
+from sb3_pola.common.diffusion import NoiseSchedule
+from sb3_pola.common.torch_layers import vectorized_mlp
+from sb3_pola.pola import pola as pola_module
+from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
+from sb3_pola.pola.pola import lookahead_q_objective
+from sb3_pola.pola.policies import DiffusionActor
+
+
+def light(**overrides) -> dict:
+    """:func:`light_kwargs` without the seed and device that :func:`model_on_dataset` sets."""
+    kwargs = light_kwargs(**overrides)
+    del kwargs["seed"], kwargs["device"]
+    return kwargs
+
+
+# ---------------------------------------------------------------- x0-prediction
+def test_sample_prediction_step_is_the_posterior_mean_of_the_clipped_output():
+    schedule = NoiseSchedule(5, "vp", prediction_type="sample")
+    x_t, out = th.randn(8, 3), 2.0 * th.randn(8, 3)
+    for t in range(5):
+        c1, c2 = schedule.posterior_mean_coef1[t], schedule.posterior_mean_coef2[t]
+        expected = c1 * out.clamp(-1, 1) + c2 * x_t  # eq. 1's posterior mean with x_0 = the network's output
+        assert th.allclose(schedule.step(out, t, x_t, None), expected, atol=1e-6)
+        # the epsilon form reads the same output as noise: a different x_0
+        assert not th.allclose(NoiseSchedule(5, "vp").step(out, t, x_t, None), expected, atol=1e-3)
+    with pytest.raises(ValueError, match="prediction_type"):
+        NoiseSchedule(5, "vp", prediction_type="v")
+
+
+def test_sample_prediction_loss_regresses_the_action():
+    th.manual_seed(0)
+    actor = DiffusionActor(4, 2, [16], 5, prediction_type="sample")
+    actions, features = th.rand(64, 2) * 2 - 1, th.randn(64, 4)
+    th.manual_seed(1)
+    loss = actor.loss(actions, features)
+    th.manual_seed(1)  # the same t and noise draws
+    t = th.randint(0, 5, (64,))
+    x_t = actor.schedule.add_noise(actions, th.randn_like(actions), t)
+    assert th.allclose(loss, ((actor.predict_noise(x_t, t, features) - actions) ** 2).mean())
+
+
+@pytest.mark.parametrize("schedule", ["vp", "linear", "cosine"])
+@pytest.mark.parametrize("deterministic", [True, False])
+def test_fast_chains_equal_the_readable_chain_under_sample_prediction(schedule, deterministic):
+    th.manual_seed(0)
+    actor = DiffusionActor(6, 3, [32, 32], 5, schedule, prediction_type="sample")
+    features = th.randn(300, 6)
+    draws = [actor.sample, lambda f, **kw: sample_chain(actor, f, **kw), lambda f, **kw: sample_no_grad(actor, f, **kw)]
+    outs = [draw(features, generator=th.Generator().manual_seed(3), deterministic=deterministic) for draw in draws]
+    for out in outs[1:]:
+        assert th.allclose(out, outs[0], atol=1e-5)
+
+
+def test_sample_prediction_learns_a_regression_faster_than_epsilon():
+    # a deterministic map a = tanh(W s): after the same steps, x0-prediction's noise-free chain is closer
+    gen = th.Generator().manual_seed(0)
+    w = th.randn(4, 2, generator=gen)
+    errors = {}
+    for kind in ("epsilon", "sample"):
+        th.manual_seed(0)
+        actor = DiffusionActor(4, 2, [64, 64], 5, prediction_type=kind)
+        opt = th.optim.Adam(actor.parameters(), lr=1e-3)
+        for _ in range(600):
+            s = th.randn(128, 4)
+            loss = actor.loss(th.tanh(s @ w), s)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+        s = th.randn(2000, 4, generator=gen)
+        errors[kind] = float(((sample_no_grad(actor, s, deterministic=True) - th.tanh(s @ w)) ** 2).mean())
+    assert errors["sample"] < 0.8 * errors["epsilon"], errors
+
+
+# ---------------------------------------------------------------- LayerNorm critics
+def test_layer_norm_bounds_the_critic_off_the_data():
+    th.manual_seed(0)
+    plain = vectorized_mlp(5, 1, [32, 32], 3, th.nn.Mish)
+    normed = vectorized_mlp(5, 1, [32, 32], 3, th.nn.Mish, layer_norm=True)
+    assert sum(isinstance(m, th.nn.LayerNorm) for m in normed) == 2
+    last = normed[-1]
+    # with normalised features, |a_j| <= max(mish(sqrt(H)), 0.31): |Q| <= |W_last|_1 * that + |b|
+    bound = float(
+        last.weight.detach().abs().sum(dim=1).max() * th.nn.functional.mish(th.tensor(32**0.5))
+        + last.bias.detach().abs().max()
+    )
+    far = 1e4 * th.randn(3, 256, 5)
+    with th.no_grad():
+        assert float(normed(far).abs().max()) <= bound + 1e-4
+        assert float(plain(far).abs().max()) > 10 * bound  # unbounded without it
+
+
+def test_critic_layer_norm_reaches_the_ensemble_and_survives_save_load(tmp_path):
+    data = synthetic_dataset(300, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], critic_layer_norm=True)))
+    assert any(isinstance(m, th.nn.LayerNorm) for m in model.critic.q_net)
+    assert any(isinstance(m, th.nn.LayerNorm) for m in model.critic_target.q_net)
+    model.save(tmp_path / "m.zip")
+    from sb3_pola import POLA
+
+    loaded = POLA.load(tmp_path / "m.zip")
+    obs = th.randn(7, 3)
+    act = th.rand(7, 2) * 2 - 1
+    assert th.equal(loaded.critic(obs, act), model.critic(obs, act))
+
+
+# ---------------------------------------------------------------- lower confidence bound
+def test_lcb_replaces_the_top_k_mean():
+    q = th.tensor([[[1.0, 4.0]], [[3.0, 4.0]], [[5.0, 4.0]]])  # [N=3, T+1=1, B=2]
+    alive, gammas = th.ones(1, 2), th.ones(1)
+    _, per_step = lookahead_q_objective(q, alive, gammas, top_k=2, lcb_coef=1.0)
+    # member mean 3 and 4, std 2 and 0: (3 - 2 + 4 - 0) / 2
+    assert per_step.tolist() == pytest.approx([2.5])
+    _, top_k = lookahead_q_objective(q, alive, gammas, top_k=2)
+    assert top_k.tolist() == pytest.approx([(2.0 + 4.0) / 2])
+    with pytest.raises(ValueError, match="lcb_coef"):
+        model_on_dataset(synthetic_dataset(100, 3, 2), **light(lcb_coef=-1.0))
+
+
+# ---------------------------------------------------------------- the Q-to-BC gradient ratio
+def test_gradient_ratio_is_logged_and_leaves_training_unchanged(monkeypatch):
+    data = synthetic_dataset(400, 3, 2, seed=0)
+
+    def train(freq: int) -> tuple[dict[str, th.Tensor], dict[str, float]]:
+        monkeypatch.setattr(pola_module, "GRADIENT_RATIO_FREQ", freq)
+        model = model_on_dataset(data, **light(rollout_length=1))
+        model.train(gradient_steps=6, batch_size=32)
+        values = dict(model.logger.name_to_value)
+        return {k: v.clone() for k, v in model.policy.state_dict().items()}, values
+
+    with_ratio, logged = train(2)
+    without, logged_none = train(1000)
+    assert logged["train/q_bc_grad_ratio"] > 0
+    assert "train/q_bc_grad_ratio" not in logged_none
+    for key in with_ratio:
+        assert th.equal(with_ratio[key], without[key]), key
+
+
+def test_gradient_ratio_scales_with_eta():
+    data = synthetic_dataset(400, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(rollout_length=0))
+    batch = model._setup_offline_data().sample(64)
+    ratios = []
+    for eta in (1.0, 3.0):
+        model._eta_value.fill_(eta)
+        with th.random.fork_rng():
+            th.manual_seed(0)
+            ratios.append(model.q_bc_gradient_ratio(batch.observations, batch.actions))
+    assert ratios[1] == pytest.approx(3.0 * ratios[0], rel=1e-4)
+
+
+# ---------------------------------------------------------------- the deterministic rule of predict
+def test_deterministic_predict_picks_the_best_candidate_by_the_pessimistic_critic():
+    data = synthetic_dataset(300, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], n_action_samples=6)))
+    model.train(gradient_steps=20, batch_size=32)
+    policy = model.policy
+    obs = th.randn(5, 3)
+    action = policy._predict(obs, deterministic=True)
+    # candidates by hand: candidate 0 is the noise-free chain, the rest from predict_seed's noise
+    noise = policy.candidate_noise(policy.actor_ema)
+    assert th.equal(noise[:, 0], th.zeros_like(noise[:, 0]))
+    for row in range(5):
+        feats = policy.actor_features(obs[row : row + 1].expand(6, -1))
+        candidates = sample_no_grad(policy.actor_ema, feats, noise=noise)
+        q = policy.critic_target(obs[row : row + 1].expand(6, -1), candidates).min(dim=0).values
+        assert th.allclose(action[row], candidates[q.argmax()], atol=1e-6)
+        noise_free = sample_no_grad(policy.actor_ema, feats[:1], deterministic=True)
+        assert th.allclose(candidates[0], noise_free[0], atol=1e-6)
+    # each row's action does not depend on the batch it came in
+    singles = th.cat([policy._predict(obs[i : i + 1], deterministic=True) for i in range(5)])
+    assert th.allclose(singles, action, atol=1e-6)
+    assert th.equal(policy._predict(obs, deterministic=True), action)
+
+
+def test_best_candidate_leaves_the_mean_of_a_symmetric_mixture():
+    # actions +-0.8 at every state (a symmetric mixture): the noise-free chain returns about their mean (0);
+    # the best of several candidates under a critic that prefers +0.8 lands on that mode
+    th.manual_seed(0)
+    n = 2000
+    obs = np.random.default_rng(0).normal(size=(n, 3)).astype(np.float32)
+    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0).astype(np.float32)
+    data = synthetic_dataset(n, 3, 1, seed=0)
+    data.observations[:] = obs
+    data.actions[:] = 0.8 * sign[:, None]
+    data.rewards[:] = 0.0
+    model = model_on_dataset(
+        data,
+        **light(
+            rollout_length=0,
+            eta=0.0,
+            policy_kwargs=dict(net_arch=[64, 64], n_action_samples=8, predict_actor="online"),
+            prediction_type="sample",
+        ),
+    )
+    model.learning_rate = 1e-3
+    model._setup_lr_schedule()
+    model.train(gradient_steps=1500, batch_size=128)
+    policy = model.policy
+    test_obs = th.as_tensor(obs[:200])
+    noise_free = sample_no_grad(policy.actor, policy.actor_features(test_obs), deterministic=True)
+    assert float(noise_free.abs().mean()) < 0.4
+    # a critic that prefers positive actions: Q = a for every member
+    policy.critic_target.forward = lambda o, a: a[:, 0].unsqueeze(0).expand(3, -1)  # type: ignore[method-assign]
+    chosen = policy._predict(test_obs, deterministic=True)
+    assert float(chosen.mean()) > 0.6
+
+
+# ---------------------------------------------------------------- cosine learning-rate decay
+def test_cosine_schedule_values_and_use_as_learning_rate():
+    from sb3_pola.common.schedules import CosineSchedule, cosine_schedule
+
+    schedule = cosine_schedule(1e-3, 1e-4)
+    # progress_remaining 1 -> 0 over learn
+    assert [schedule(p) for p in (1.0, 0.5, 0.0)] == pytest.approx([1e-3, 5.5e-4, 1e-4])
+    assert schedule(0.75) == pytest.approx(1e-4 + 9e-4 * 0.5 * (1 + np.cos(np.pi / 4)))
+    with pytest.raises(ValueError, match=">= 0"):
+        CosineSchedule(-1.0)
+    model = model_on_dataset(synthetic_dataset(200, 3, 2), **light(rollout_length=0, learning_rate=cosine_schedule(1e-3)))
+    model._current_progress_remaining = 0.5
+    model.train(gradient_steps=1, batch_size=16)
+    assert model.actor.optimizer.param_groups[0]["lr"] == pytest.approx(5e-4)
+    assert model.critic.optimizer.param_groups[0]["lr"] == pytest.approx(5e-4)
