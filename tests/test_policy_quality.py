@@ -231,3 +231,22 @@ def test_cosine_schedule_values_and_use_as_learning_rate():
     model.train(gradient_steps=1, batch_size=16)
     assert model.actor.optimizer.param_groups[0]["lr"] == pytest.approx(5e-4)
     assert model.critic.optimizer.param_groups[0]["lr"] == pytest.approx(5e-4)
+
+
+# ---------------------------------------------------------------- the dynamics fit
+def test_default_dynamics_fit_beats_the_plain_nll_on_the_shipped_data():
+    from sb3_pola.common.datasets import load_offline_dataset
+    from sb3_pola.common.dynamics import EnsembleDynamics
+    from sb3_pola.common.dynamics_trainer import DynamicsTrainer
+
+    data = load_offline_dataset("invertedpendulum/medium-v0", use_cache=False)
+    errors = {}
+    for mean_loss in (None, "nll"):
+        th.manual_seed(0)
+        kwargs = {} if mean_loss is None else {"mean_loss": mean_loss}
+        model = EnsembleDynamics(4, 1, n_members=2, n_elites=1, hidden_dim=32, n_layers=2, **kwargs)
+        info = DynamicsTrainer(model, max_steps=600, max_epoch_steps=100, patience=100).fit(
+            data.observations, data.actions, data.next_observations, data.rewards, data.dones
+        )
+        errors[mean_loss] = info["holdout_mse"]
+    assert errors[None] < 0.75 * errors["nll"], errors
