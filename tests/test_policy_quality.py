@@ -250,3 +250,41 @@ def test_default_dynamics_fit_beats_the_plain_nll_on_the_shipped_data():
         )
         errors[mean_loss] = info["holdout_mse"]
     assert errors[None] < 0.75 * errors["nll"], errors
+
+
+# ---------------------------------------------------------------- observation-seeded noise
+def test_observation_noise_is_standard_normal_per_observation_and_batch_free():
+    from sb3_pola.pola.policies import observation_noise
+
+    obs = th.randn(20000, 5, generator=th.Generator().manual_seed(0))
+    noise = observation_noise(obs, 4, 2)  # [5, B, 2]
+    assert noise.shape == (5, 20000, 2)
+    assert abs(float(noise.mean())) < 0.02 and abs(float(noise.std()) - 1.0) < 0.02
+    assert float((noise.abs() > 1.96).float().mean()) == pytest.approx(0.05, abs=0.005)
+    # the draws of different (step, action) slots are uncorrelated
+    corr = th.corrcoef(noise.reshape(10, -1))
+    assert float((corr - th.eye(10)).abs().max()) < 0.05
+    assert th.equal(observation_noise(obs[3:9], 4, 2), noise[:, 3:9])  # each row its own, whatever the batch
+    assert not th.equal(observation_noise(obs[:4], 4, 2, seed=1), noise[:, :4])
+
+
+def test_deterministic_predict_draws_the_observations_noise():
+    from sb3_pola.pola.policies import observation_noise
+
+    data = synthetic_dataset(300, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(rollout_length=0))
+    model.train(gradient_steps=5, batch_size=32)
+    policy = model.policy
+    assert policy.deterministic_rule == "observation_noise"
+    obs = th.randn(6, 3)
+    action = policy._predict(obs, deterministic=True)
+    feats = policy.actor_features(obs)
+    noise = observation_noise(obs, policy.actor_ema.n_diffusion_steps, 2, policy.predict_seed)
+    expected = sample_no_grad(policy.actor_ema, feats, noise=noise)
+    assert th.allclose(action, expected, atol=1e-6)
+    singles = th.cat([policy._predict(obs[i : i + 1], deterministic=True) for i in range(6)])
+    assert th.allclose(singles, action, atol=1e-5)
+    policy.deterministic_rule = "noise_free"
+    assert th.allclose(policy._predict(obs, deterministic=True), sample_no_grad(policy.actor_ema, feats, deterministic=True))
+    with pytest.raises(ValueError, match="deterministic_rule"):
+        model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule="mode")))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import itertools
+import math
 from typing import Any
 
 import numpy as np
@@ -121,6 +122,34 @@ class DiffusionActor(nn.Module):
         return x.clamp(-1.0, 1.0)
 
 
+DETERMINISTIC_RULES = ("observation_noise", "noise_free")
+
+
+def observation_noise(obs: th.Tensor, n_steps: int, action_dim: int, seed: int = 0) -> th.Tensor:
+    """``[n_steps + 1, B, A]`` standard normal noise that is a fixed function of each observation (row of ``obs``).
+
+    A deterministic ``predict`` that still draws a sample of the policy: the same observation always gets the same
+    chain noise, different observations get independent-looking draws (so no common noise vector shifts every
+    action the same way, as one fixed draw for all states does). Uniforms from a sine hash of fixed random
+    projections of the observation, in float64, then Box-Muller. Plain tensor operations, so the exported graph
+    computes the same noise.
+
+    :param obs: ``[B, obs_dim]`` raw observations
+    :param n_steps: diffusion steps (the chain uses ``n_steps + 1`` noise vectors)
+    :param action_dim: action size
+    :param seed: seed of the projections
+    """
+    n_draws = (n_steps + 1) * action_dim
+    generator = th.Generator(device="cpu").manual_seed(seed)
+    proj = th.randn(obs.shape[-1], 2 * n_draws, generator=generator, dtype=th.float64).to(obs.device)  # [obs, 2D]
+    offset = th.rand(2 * n_draws, generator=generator, dtype=th.float64).to(obs.device) * 1000.0  # [2D]
+    key = obs.to(th.float64) @ proj + offset  # [B, 2D]
+    uniform = th.frac(th.sin(key).abs() * 43758.5453123).clamp(1e-12, 1.0 - 1e-12)  # [B, 2D]
+    u1, u2 = uniform[:, :n_draws], uniform[:, n_draws:]
+    normal = th.sqrt(-2.0 * th.log(u1)) * th.cos(2.0 * math.pi * u2)  # [B, D]
+    return normal.to(obs.dtype).view(-1, n_steps + 1, action_dim).transpose(0, 1).contiguous()
+
+
 class EnsembleCritic(nn.Module):
     """``N`` Q-networks as one vectorised module: ``[N, B, in]`` through batched matmuls (paper section IV).
 
@@ -167,13 +196,16 @@ class EnsembleCritic(nn.Module):
 class POLAPolicy(BasePolicy):
     """Policy of POLA: diffusion actor on ``s_new`` (state + products), its EMA copy, critic ensemble and targets.
 
-    ``predict`` uses the EMA actor (as Diffusion-QL evaluates). With ``n_action_samples > 1``
-    it draws that many candidate actions per state and keeps the one with the highest
-    pessimistic (min over the ensemble) Q-value (``deterministic=True``), or samples one with
-    probabilities ``softmax(Q)`` as Diffusion-QL does. ``deterministic=True`` with one sample runs
-    the noise-free reverse chain (``a_T = 0``, posterior means); with several candidates it draws
-    their noise from a generator with the fixed seed ``predict_seed`` and keeps the best by Q. Either
-    way the same observation always gives the same action.
+    ``predict`` uses the EMA actor (as Diffusion-QL evaluates). ``deterministic=False`` draws one sample of the
+    reverse chain. ``deterministic=True`` must give the same action for the same observation; with one sample
+    (``n_action_samples=1``) it follows ``deterministic_rule``: ``"observation_noise"`` (default) draws the chain
+    with noise that is a fixed function of the observation (:func:`observation_noise`), so it is a sample of the
+    policy, reproducible, and moves to a mode on mixed data; ``"noise_free"`` starts from ``a_T = 0`` and follows
+    the posterior means, which returns about the conditional mean, and so stands still between the modes of a
+    symmetric mixture (measurements in docs/results.md). With ``n_action_samples > 1`` it draws that many
+    candidates (candidate 0 noise-free, the others with noise from ``predict_seed``, the same for every state)
+    and keeps the one with the highest pessimistic (min over the ensemble) Q-value; ``deterministic=False`` then
+    samples one with probabilities ``softmax(Q)`` as Diffusion-QL does.
 
     :param observation_space: a flat ``Box``
     :param action_space: a ``Box``
@@ -191,6 +223,8 @@ class POLAPolicy(BasePolicy):
     :param time_embedding_dim: size of the diffusion-step embedding
     :param n_action_samples: candidate actions per state in ``predict``
     :param predict_seed: seed of the candidates' noise in deterministic ``predict`` with ``n_action_samples > 1``
+    :param deterministic_rule: the action of a deterministic ``predict`` with one sample: ``"observation_noise"``
+        or ``"noise_free"`` (see above)
     :param predict_actor: the actor ``predict`` samples from: ``"ema"`` (Diffusion-QL's evaluation) or
         ``"online"`` (the trained actor itself; the EMA lags it by about ``1 / (1 - ema_decay)`` updates)
     :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`; ``None`` builds no model
@@ -224,6 +258,7 @@ class POLAPolicy(BasePolicy):
         n_action_samples: int = 1,
         predict_seed: int = 0,
         predict_actor: str = "ema",
+        deterministic_rule: str = "observation_noise",
         dynamics_kwargs: dict[str, Any] | None = None,
         compile_activations: bool = False,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
@@ -254,6 +289,9 @@ class POLAPolicy(BasePolicy):
         if predict_actor not in ("ema", "online"):
             raise ValueError(f"predict_actor must be 'ema' or 'online', got {predict_actor!r}")
         self.predict_actor = predict_actor
+        if deterministic_rule not in DETERMINISTIC_RULES:
+            raise ValueError(f"deterministic_rule must be one of {DETERMINISTIC_RULES}, got {deterministic_rule!r}")
+        self.deterministic_rule = deterministic_rule
         self.net_arch = net_arch
         self.activation_fn = activation_fn
         self.n_critics = n_critics
@@ -317,6 +355,7 @@ class POLAPolicy(BasePolicy):
             n_action_samples=self.n_action_samples,
             predict_seed=self.predict_seed,
             predict_actor=self.predict_actor,
+            deterministic_rule=self.deterministic_rule,
             dynamics_kwargs=self.dynamics_kwargs,
             compile_activations=self.compile_activations,
             lr_schedule=self._dummy_schedule,
@@ -345,7 +384,10 @@ class POLAPolicy(BasePolicy):
         actor = self.actor_ema if self.predict_actor == "ema" else self.actor
         # the fast form of actor.sample (same function, float rounding aside): predict needs no gradient
         if n == 1:
-            return sample_no_grad(actor, self.actor_features(obs), deterministic=deterministic)
+            noise = None
+            if deterministic and self.deterministic_rule == "observation_noise":
+                noise = observation_noise(obs, actor.n_diffusion_steps, actor.action_dim, self.predict_seed)
+            return sample_no_grad(actor, self.actor_features(obs), deterministic=deterministic, noise=noise)
         batch_size = obs.shape[0]
         obs_rep = obs.repeat_interleave(n, dim=0)  # [B * n, obs]
         features = self.actor_features(obs_rep)
