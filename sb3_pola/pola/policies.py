@@ -125,13 +125,34 @@ class DiffusionActor(nn.Module):
 DETERMINISTIC_RULES = ("observation_noise", "noise_free")
 
 
+def observation_noise_projection(obs_dim: int, n_steps: int, action_dim: int, seed: int = 0) -> tuple[th.Tensor, th.Tensor]:
+    """The fixed float64 projection ``[obs_dim, 2 D]`` and offset ``[2 D]`` of :func:`observation_noise`
+    (``D = (n_steps + 1) action_dim``), drawn from ``seed``."""
+    n_draws = (n_steps + 1) * action_dim
+    generator = th.Generator(device="cpu").manual_seed(seed)
+    projection = th.randn(obs_dim, 2 * n_draws, generator=generator, dtype=th.float64)
+    offset = th.rand(2 * n_draws, generator=generator, dtype=th.float64) * 1000.0
+    return projection, offset
+
+
+def noise_from_projection(obs: th.Tensor, projection: th.Tensor, offset: th.Tensor, n_steps: int) -> th.Tensor:
+    """:func:`observation_noise` from a given projection: uniforms from a sine hash, then Box-Muller."""
+    key = obs.to(th.float64) @ projection + offset  # [B, 2D]
+    hashed = th.sin(key).abs() * 43758.5453123
+    uniform = (hashed - th.floor(hashed)).clamp(1e-12, 1.0 - 1e-12)  # [B, 2D] in (0, 1)
+    n_draws = uniform.shape[-1] // 2
+    u1, u2 = uniform[:, :n_draws], uniform[:, n_draws:]
+    normal = th.sqrt(-2.0 * th.log(u1)) * th.cos(2.0 * math.pi * u2)  # [B, D]
+    return normal.to(obs.dtype).reshape(obs.shape[0], n_steps + 1, -1).transpose(0, 1)  # [n_steps + 1, B, A]
+
+
 def observation_noise(obs: th.Tensor, n_steps: int, action_dim: int, seed: int = 0) -> th.Tensor:
     """``[n_steps + 1, B, A]`` standard normal noise that is a fixed function of each observation (row of ``obs``).
 
     A deterministic ``predict`` that still draws a sample of the policy: the same observation always gets the same
     chain noise, different observations get independent-looking draws (so no common noise vector shifts every
     action the same way, as one fixed draw for all states does). Uniforms from a sine hash of fixed random
-    projections of the observation, in float64, then Box-Muller. Plain tensor operations, so the exported graph
+    projections of the observation, in float64, then Box-Muller: plain tensor operations, so the exported graph
     computes the same noise.
 
     :param obs: ``[B, obs_dim]`` raw observations
@@ -139,15 +160,8 @@ def observation_noise(obs: th.Tensor, n_steps: int, action_dim: int, seed: int =
     :param action_dim: action size
     :param seed: seed of the projections
     """
-    n_draws = (n_steps + 1) * action_dim
-    generator = th.Generator(device="cpu").manual_seed(seed)
-    proj = th.randn(obs.shape[-1], 2 * n_draws, generator=generator, dtype=th.float64).to(obs.device)  # [obs, 2D]
-    offset = th.rand(2 * n_draws, generator=generator, dtype=th.float64).to(obs.device) * 1000.0  # [2D]
-    key = obs.to(th.float64) @ proj + offset  # [B, 2D]
-    uniform = th.frac(th.sin(key).abs() * 43758.5453123).clamp(1e-12, 1.0 - 1e-12)  # [B, 2D]
-    u1, u2 = uniform[:, :n_draws], uniform[:, n_draws:]
-    normal = th.sqrt(-2.0 * th.log(u1)) * th.cos(2.0 * math.pi * u2)  # [B, D]
-    return normal.to(obs.dtype).view(-1, n_steps + 1, action_dim).transpose(0, 1).contiguous()
+    projection, offset = observation_noise_projection(obs.shape[-1], n_steps, action_dim, seed)
+    return noise_from_projection(obs, projection.to(obs.device), offset.to(obs.device), n_steps)
 
 
 class EnsembleCritic(nn.Module):

@@ -1,0 +1,116 @@
+"""Issue #23's return screen: train POLA at the CPU preset's sizes on one dataset and seed, then evaluate the final
+model under several rules of ``predict`` (10 episodes each, the score protocol's resets).
+
+    python experiments/policy_quality/screen.py --dataset halfcheetah/medium-v0 --name BC \\
+        --kwargs '{"eta": 0.0, "rollout_length": 0}' [--seed 0] [--rules noisefree,obsnoise,sample,best10]
+
+``--kwargs`` is JSON of POLA arguments over the preset's sizes; ``"lr_cos": X`` sets ``learning_rate`` to a cosine
+decay from X. The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip`` (``OUT``: ``outputs/policy_quality``); a
+second call with the same name and seed evaluates the saved model (e.g. under another rule). The dynamics model is
+fitted once per dataset and reused (``dynamics.pt``). One JSON line per run, appended to ``OUT/screen.jsonl``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import time
+from typing import Any
+
+import numpy as np
+import torch as th
+
+from sb3_pola import POLA
+from sb3_pola.common.datasets import load_offline_dataset, make_env
+from sb3_pola.common.schedules import cosine_schedule
+
+# the cpu preset's sizes (sb3-pola score --preset cpu), eager
+CPU: dict[str, Any] = {
+    "batch_size": 128,
+    "n_critics": 5,
+    "top_k": 2,
+    "dynamics_kwargs": {"n_members": 5, "n_elites": 3, "hidden_dim": 128, "n_layers": 3},
+    "dynamics_fit_kwargs": {"max_steps": 2000},
+}
+# rule -> (n_action_samples, deterministic, deterministic_rule)
+RULES = {
+    "noisefree": (1, True, "noise_free"),
+    "obsnoise": (1, True, "observation_noise"),
+    "sample": (1, False, "noise_free"),
+    "best10": (10, True, "noise_free"),
+}
+
+
+def episodes(model: POLA, env: Any, n: int, seed: int, deterministic: bool) -> tuple[np.ndarray, list[bool | None]]:
+    """Returns and successes of ``n`` episodes, reset with seeds ``seed + i`` (the score protocol's)."""
+    from sb3_pola.common.scores import update_success
+
+    returns, successes = [], []
+    with th.random.fork_rng():
+        th.manual_seed(seed)
+        for i in range(n):
+            obs, _ = env.reset(seed=seed + i)
+            done, total, success = False, 0.0, None
+            while not done:
+                action, _ = model.predict(obs, deterministic=deterministic)
+                obs, reward, terminated, truncated, info = env.step(action)
+                total += float(reward)
+                done = terminated or truncated
+                success = update_success(success, info)
+            returns.append(total)
+            successes.append(success)
+    return np.array(returns), successes
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--dataset", required=True)
+    parser.add_argument("--name", required=True)
+    parser.add_argument("--kwargs", default="{}")
+    parser.add_argument("--steps", type=int, default=10_000)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--rules", default="noisefree,obsnoise,sample,best10")
+    parser.add_argument("--out", default="outputs/policy_quality")
+    args = parser.parse_args()
+    th.set_num_threads(1)
+    kwargs = {**CPU, **json.loads(args.kwargs)}
+    if "lr_cos" in kwargs:
+        kwargs["learning_rate"] = cosine_schedule(kwargs.pop("lr_cos"))
+    policy_kwargs = {"net_arch": [128, 128], **kwargs.pop("policy_kwargs", {})}
+    data = load_offline_dataset(args.dataset)
+    folder = pathlib.Path(args.out) / args.dataset.replace("/", "_")
+    (folder / args.name).mkdir(parents=True, exist_ok=True)
+    model_path = folder / args.name / f"seed{args.seed}.zip"
+    start = time.time()
+    if model_path.exists():
+        model = POLA.load(model_path)
+    else:
+        model = POLA("MlpPolicy", dataset=data, seed=args.seed, policy_kwargs=policy_kwargs, **kwargs)
+        dynamics = folder / "dynamics.pt"
+        shared = kwargs.get("dynamics_kwargs") == CPU["dynamics_kwargs"]
+        if model.policy.dynamics is not None and shared and dynamics.exists():
+            model.policy.dynamics.load_state_dict(th.load(dynamics))
+            model.policy.dynamics_fitted.fill_(True)
+        model.learn(args.steps)
+        if model.policy.dynamics is not None and shared and not dynamics.exists():
+            th.save(model.policy.dynamics.state_dict(), dynamics)
+        model.save(model_path)
+    env = make_env(data)
+    row: dict[str, Any] = {"dataset": args.dataset, "name": args.name, "seed": args.seed, "steps": args.steps}
+    row["train_s"] = round(time.time() - start)
+    for rule in args.rules.split(","):
+        model.policy.n_action_samples, deterministic, model.policy.deterministic_rule = RULES[rule]
+        returns, successes = episodes(model, env, args.episodes, 10_000 * (args.seed + 1), deterministic)
+        score = data.normalized_score(returns)
+        row[rule] = round(score if score is not None else float(returns.mean()), 1)
+        if successes and successes[0] is not None:
+            row[rule + "_success"] = round(float(np.mean([bool(s) for s in successes])), 2)
+    print(json.dumps(row), flush=True)
+    with open(pathlib.Path(args.out) / "screen.jsonl", "a") as f:
+        f.write(json.dumps(row) + "\n")
+
+
+if __name__ == "__main__":
+    main()
