@@ -246,7 +246,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--eval-freq", type=int, default=2_000, help="gradient steps between evaluations")
     parser.add_argument("--eval-episodes", type=int, default=10, help="episodes per evaluation")
     parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
-    parser.add_argument("--out", default="results/score", help="output folder (score's, so table.md shows both)")
+    parser.add_argument("--out", default="outputs/score", help="output folder (score's, so table.md shows both)")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads of each run")
     parser.add_argument("--venv", default=DEFAULT_VENV, help="virtual environment of d3rlpy (created if missing)")
     parser.add_argument("--python", default=sys.executable, help="Python that creates the venv")

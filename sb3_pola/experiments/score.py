@@ -1026,7 +1026,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--device", default="auto", help="cpu, cuda, cuda:1 or auto")
     parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
     parser.add_argument(
-        "--out", default="results/score", help="output folder, or an fsspec URL (s3://bucket/run with s3fs installed, ...)"
+        "--out", default="outputs/score", help="output folder, or an fsspec URL (s3://bucket/run with s3fs installed, ...)"
     )
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--log-interval", type=int, help="gradient steps between rows of the training statistics")
