@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from helpers import ACT_HIGH, ACT_LOW, EPISODES, OBS_DIM, make_episodes, write_minari_dataset
 
+from sb3_pola.cli import datasets as datasets_cli
 from sb3_pola.common import datasets as ds
 from sb3_pola.common import scores
 from sb3_pola.common.datasets import (
@@ -128,7 +129,7 @@ def test_one_normalized_score() -> None:
     import inspect
 
     from sb3_pola.common import callbacks, offline_algorithm
-    from sb3_pola.experiments import peers_worker
+    from sb3_pola.grid import peers_worker
 
     assert ds.normalized_score is scores.normalized_score
     assert callbacks.normalized_score is offline_algorithm.normalized_score is scores.normalized_score
@@ -275,7 +276,7 @@ def test_empty_dataset_rejected(make_dataset):
 
 
 def test_datasets_cli(tiny_dataset, capsys):
-    assert ds.main([]) == 0
+    assert datasets_cli.main([]) == 0
     out = capsys.readouterr().out
     assert tiny_dataset in out and str(N_STEPS) in out and "-10.0" in out
 

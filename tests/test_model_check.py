@@ -9,7 +9,7 @@ import pytest
 
 from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset
-from sb3_pola.experiments import model_check
+from sb3_pola.grid import model_check
 
 
 def test_chained_starts_stay_in_one_episode():

@@ -1,7 +1,7 @@
 """The D4RL normalised score, ``100 (R - ref_min) / (ref_max - ref_min)``, and the success rate: the one implementation.
 
 This module imports only NumPy and the standard library: the d3rlpy baselines' worker
-(:mod:`sb3_pola.experiments.peers_worker`) runs in a virtual environment without ``sb3_pola`` and
+(:mod:`sb3_pola.grid.peers_worker`) runs in a virtual environment without ``sb3_pola`` and
 loads this file by its path.
 """
 

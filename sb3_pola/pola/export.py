@@ -11,7 +11,6 @@ rescaling to the action space's bounds. Input ``obs`` ``[batch, obs_dim]`` (floa
 
 from __future__ import annotations
 
-import argparse
 import copy
 import logging
 import os
@@ -277,37 +276,3 @@ def _export_onnx(graph: DeterministicPolicyGraph, example: th.Tensor, path: path
         registry_logger.setLevel(level)
     assert program is not None
     program.save(str(path), external_data=False)
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="sb3-pola export", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("model", help="a saved POLA model (.zip)")
-    parser.add_argument("out", help="output file")
-    parser.add_argument(
-        "--format",
-        choices=EXPORT_FORMATS,
-        default=None,
-        help=f"default: torchscript if OUT ends in {', '.join(TORCHSCRIPT_SUFFIXES)}, else onnx",
-    )
-    args = parser.parse_args(argv)
-    from sb3_pola.pola.pola import POLA
-
-    model = POLA.load(args.model, device="cpu")
-    fmt = args.format or _infer_format(args.out)
-    try:
-        out = model.export_policy(args.out, format=fmt)
-    except PolicyExportError as error:
-        parser.exit(1, f"sb3-pola export: {error}\n")
-    policy = model.policy
-    print(
-        f"wrote {out} ({fmt}): {INPUT_NAME} [batch, {policy.observation_space.shape[0]}] float32 -> "  # type: ignore[index]
-        f"{OUTPUT_NAME} [batch, {policy.action_space.shape[0]}], {policy.predict_actor} actor, "  # type: ignore[index]
-        f"{policy.n_diffusion_steps} denoising steps"
-    )
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

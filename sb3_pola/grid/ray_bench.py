@@ -1,4 +1,4 @@
-"""Wall time of a small ``sb3-pola score`` grid, sequential against ``--ray`` (``python -m sb3_pola.benchmarks.score_grid``).
+"""Wall time of a small ``sb3-pola score`` grid, sequential against ``--ray`` (``python -m sb3_pola.grid.ray_bench``).
 
 Both runs are ``sb3-pola score`` commands in subprocesses, one after the other, on the same grid (by default the
 shipped InvertedPendulum datasets x T0, T1 x one seed, tiny networks, a few hundred steps), each into a fresh
@@ -16,7 +16,7 @@ import sys
 import tempfile
 import time
 
-from sb3_pola.experiments import score
+from sb3_pola.grid.rows import CSV_FIELDS, read_rows
 
 DATASETS = ["invertedpendulum/medium-v0", "invertedpendulum/medium-replay-v0"]
 TINY = ["--preset", "cpu", "--no-compile", "--device", "cpu", "--threads", "1", "-v", "0", "--net-arch", "32", "32"]
@@ -32,7 +32,7 @@ def run_score(arguments: list[str]) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m sb3_pola.benchmarks.score_grid", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m sb3_pola.grid.ray_bench", description=__doc__.splitlines()[0])
     parser.add_argument("--datasets", nargs="+", default=DATASETS)
     parser.add_argument("--variants", nargs="+", default=["T0", "T1"])
     parser.add_argument("--seeds", nargs="+", default=["0"])
@@ -58,8 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"--ray:      {ray:.1f} s", flush=True)
 
     def scores(folder: str) -> list[tuple]:
-        rows = score.read_rows(out / folder / "scores.csv")
-        return [tuple(str(r[k]) for k in score.CSV_FIELDS if k != "wall_s") for r in rows]  # str: NaN equals NaN
+        rows = read_rows(out / folder / "scores.csv")
+        return [tuple(str(r[k]) for k in CSV_FIELDS if k != "wall_s") for r in rows]  # str: NaN equals NaN
 
     print(f"ratio sequential / ray: {sequential / ray:.2f}")
     print(f"scores equal: {scores('sequential') == scores('ray')} ({len(scores('ray'))} rows)")

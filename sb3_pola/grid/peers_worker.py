@@ -8,7 +8,7 @@ can run it directly::
     .venv-peers/bin/python peers_worker.py --npz data.npz --algo td3bc --seed 0 --steps 10000 \\
         --eval-freq 2000 --eval-episodes 10 --csv out/peers.csv --dataset halfcheetah/medium-v0
 
-Data. ``--npz`` is written by ``sb3_pola.experiments.peers.export_dataset`` from our
+Data. ``--npz`` is written by ``sb3_pola.grid.peers.export_dataset`` from our
 ``OfflineDataset``: flat transitions (``observations``, ``actions`` in [-1, 1], ``rewards``,
 ``next_observations``, ``terminals``, ``timeouts``) where every episode ends with exactly one of
 ``terminals`` (the env terminated) or ``timeouts`` (truncated, or cut by the end of the data).
@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-# must match sb3_pola.experiments.score.CSV_FIELDS (a test checks it)
+# must match sb3_pola.grid.rows.CSV_FIELDS (a test checks it)
 CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s", "success"]
 VARIANT_NAMES = {"td3bc": "d3rlpy-TD3+BC", "iql": "d3rlpy-IQL", "bc": "d3rlpy-BC"}
 # the npz arrays of one transition each
@@ -548,7 +548,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description="One d3rlpy baseline cell of sb3-pola peers.")
-    parser.add_argument("--npz", help="dataset exported by sb3_pola.experiments.peers")
+    parser.add_argument("--npz", help="dataset exported by sb3_pola.grid.peers")
     parser.add_argument("--algo", choices=list(VARIANT_NAMES), default="td3bc")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--steps", type=int, default=10_000)

@@ -39,8 +39,11 @@ from typing import Any
 
 import numpy as np
 
-from sb3_pola.experiments import score
-from sb3_pola.experiments.peers_worker import VARIANT_NAMES
+from sb3_pola.common.machine import machine_info
+from sb3_pola.grid.peers_worker import VARIANT_NAMES
+from sb3_pola.grid.report import write_reports
+from sb3_pola.grid.rows import slug
+from sb3_pola.grid.variants import DEFAULT_DATASETS, DEFAULT_VARIANTS
 
 ALGOS = list(VARIANT_NAMES)
 PEER_REQUIREMENTS = ["d3rlpy==2.8.1", "gymnasium[mujoco]==1.0.*", "torch==2.13.0"]
@@ -174,7 +177,7 @@ def peer_versions(python: pathlib.Path) -> dict[str, str]:
 
 
 def cell_name(dataset: str, algo: str, seed: int) -> str:
-    return f"{score.slug(dataset)}__d3rlpy-{algo}__seed{seed}"
+    return f"{slug(dataset)}__d3rlpy-{algo}__seed{seed}"
 
 
 def worker_env(threads: int) -> dict[str, str]:
@@ -239,7 +242,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         prog="sb3-pola peers",
         description="d3rlpy baselines (TD3+BC, IQL, BC) on the same datasets and evaluation protocol as sb3-pola score.",
     )
-    parser.add_argument("--datasets", nargs="+", default=score.DEFAULT_DATASETS, help="Minari dataset ids")
+    parser.add_argument("--datasets", nargs="+", default=DEFAULT_DATASETS, help="Minari dataset ids")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--algos", nargs="+", default=ALGOS, choices=ALGOS)
     parser.add_argument("--steps", type=int, default=10_000, help="gradient steps per run")
@@ -291,7 +294,7 @@ def main(argv: list[str] | None = None) -> int:
         "algos": sorted({*args.algos, *(saved or {}).get("algos", [])}),
         "variants": {algo: VARIANT_NAMES[algo] for algo in ALGOS},
         "versions": peer_versions(python),
-        "machine": score.machine_info("cpu"),
+        "machine": machine_info("cpu"),
         "threads": args.threads,
         "started": (saved or {}).get("started", datetime.date.today().isoformat()),
         "date": datetime.date.today().isoformat(),
@@ -306,10 +309,10 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"[peers] {name}: done, skipped")
             continue
         if dataset not in exported:
-            exported[dataset] = export_dataset(dataset, out / "peers_data" / f"{score.slug(dataset)}.npz")
+            exported[dataset] = export_dataset(dataset, out / "peers_data" / f"{slug(dataset)}.npz")
         run_cell(python, exported[dataset], dataset, algo, seed, args, out)
-        score.write_reports(out, score.DEFAULT_VARIANTS, _score_config(out))
-    score.write_reports(out, score.DEFAULT_VARIANTS, _score_config(out))
+        write_reports(out, DEFAULT_VARIANTS, _score_config(out))
+    write_reports(out, DEFAULT_VARIANTS, _score_config(out))
     return 0
 
 

@@ -1,9 +1,9 @@
 """``sb3-pola score --ray``: the score grid's (dataset, variant, seed) cells as Ray tasks, on one machine or a cluster.
 
-Every cell is one task running :func:`~sb3_pola.experiments.score.run_stored_cell` against the output,
+Every cell is one task running :func:`~sb3_pola.grid.run_stored_cell` against the output,
 which every worker must see: a shared folder, or an fsspec URL (``s3://bucket/run`` with s3fs installed;
 each task then works in a local scratch folder, pulling its files first and pushing them at every checkpoint,
-:mod:`sb3_pola.experiments.storage`). A dynamics model shared by several cells is
+:mod:`sb3_pola.grid.storage`). A dynamics model shared by several cells is
 fitted first by a task of the cell that fits it in the sequential run: it stops after its first gradient
 step with a checkpoint, then every cell sharing the model starts, that one continuing from its checkpoint.
 On CPU the scores are therefore those of the sequential run.
@@ -26,11 +26,15 @@ from collections.abc import Callable
 from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
-from sb3_pola.cli import missing_extra_message
-from sb3_pola.experiments import score
+from sb3_pola.common.extras import missing_extra_message
+from sb3_pola.grid.cell import dynamics_path, run_stored_cell
+from sb3_pola.grid.report import publish_reports
+from sb3_pola.grid.rows import Cell, adopt_rows, cell_name, marker_path, merge_rows
+from sb3_pola.grid.storage import open_workspace
+from sb3_pola.grid.variants import Config, needs_dynamics
 
 if TYPE_CHECKING:
-    from sb3_pola.experiments.storage import Workspace
+    from sb3_pola.grid.storage import Workspace
 
 MISSING_RAY = missing_extra_message("score", "ray") + " (for --ray)"
 # seconds between two merges of the cells' rows into scores.csv, and between two rewrites of the reports (the
@@ -38,83 +42,9 @@ MISSING_RAY = missing_extra_message("score", "ray") + " (for --ray)"
 MERGE_INTERVAL = 10.0
 REPORT_INTERVAL = 120.0
 
-Cell = tuple[str, str, int]
-
-
-def rows_path(out: pathlib.Path, cell: Cell) -> pathlib.Path:
-    """The file of a cell's evaluation rows (``rows/<cell>.csv``), merged into ``scores.csv`` by the driver."""
-    return out / score.rows_rel(*cell)
-
-
-def marker_path(out: pathlib.Path, cell: Cell) -> pathlib.Path:
-    """The marker of a finished cell (``cells/<cell>.json``)."""
-    return out / "cells" / f"{score.cell_name(*cell)}.json"
-
-
-def _key(row: dict[str, Any]) -> Cell:
-    return row["dataset"], row["variant"], row["seed"]
-
-
-def adopt_rows(out: pathlib.Path, cells: list[Cell]) -> None:
-    """Give each cell its own rows file, from ``scores.csv`` (a sequential run interrupted, resumed with ``--ray``).
-
-    :param out: output folder
-    :param cells: the cells about to run
-    """
-    rows = score.read_rows(out / "scores.csv")
-    for cell in cells:
-        path = rows_path(out, cell)
-        mine = [r for r in rows if _key(r) == cell]
-        if mine and not path.exists():
-            path.parent.mkdir(parents=True, exist_ok=True)
-            score.write_rows(path, mine)
-
-
-def collect_rows(out: pathlib.Path, cells: list[Cell]) -> list[dict[str, Any]]:
-    """Rewrite ``scores.csv`` from the cells' rows files: the grid's cells in its order, then any other cell.
-
-    A cell with a rows file takes its rows from there; rows of other cells already in ``scores.csv`` are kept.
-
-    :param out: output folder
-    :param cells: the grid's cells, in the sequential run's order
-    :return: the rows written
-    """
-    files = {cell: rows_path(out, cell) for cell in cells}
-    listed = set(files.values())
-    folder = out / "rows"
-    others = sorted(p for p in folder.glob("*.csv") if p not in listed) if folder.is_dir() else []
-    by_cell: dict[Cell, list[dict[str, Any]]] = {}
-    for path in [*files.values(), *others]:
-        try:
-            rows = score.read_rows(path)
-        except (ValueError, KeyError, TypeError):  # a row being written right now (the next merge reads it whole)
-            continue
-        for row in rows:
-            by_cell.setdefault(_key(row), []).append(row)
-    merged = [r for r in score.read_rows(out / "scores.csv") if _key(r) not in by_cell]
-    for rows in by_cell.values():
-        merged += rows
-    if merged:
-        score.write_rows(out / "scores.csv", merged)
-    return merged
-
-
-def merge_rows(view: Workspace, cells: list[Cell]) -> list[dict[str, Any]]:
-    """:func:`collect_rows` in a workspace: ``scores.csv`` and the rows files pulled, the merged ``scores.csv`` pushed.
-
-    :param view: the workspace of the output
-    :param cells: the grid's cells, in the sequential run's order
-    :return: the rows written
-    """
-    view.pull("scores.csv")
-    view.pull_tree("rows")
-    merged = collect_rows(view.folder, cells)
-    view.push("scores.csv")
-    return merged
-
 
 def plan_dynamics_fits(
-    cells: list[Cell], config: score.Config, out: pathlib.Path, exists: Callable[[pathlib.Path], bool] = pathlib.Path.exists
+    cells: list[Cell], config: Config, out: pathlib.Path, exists: Callable[[pathlib.Path], bool] = pathlib.Path.exists
 ) -> dict[pathlib.Path, Cell]:
     """For each dynamics model still to fit, the cell fitting it in the sequential run: the first one needing it.
 
@@ -126,8 +56,8 @@ def plan_dynamics_fits(
     """
     fits: dict[pathlib.Path, Cell] = {}
     for cell in cells:
-        path = score.dynamics_path(out, cell[0], cell[2], config)
-        if score.needs_dynamics(cell[1], config) and not exists(path) and path not in fits:
+        path = dynamics_path(out, cell[0], cell[2], config)
+        if needs_dynamics(cell[1], config) and not exists(path) and path not in fits:
             fits[path] = cell
     return fits
 
@@ -143,10 +73,10 @@ def cell_task(
     environ: dict[str, str],
     *after: Any,
 ) -> bool:
-    """One cell on a Ray worker: :func:`~sb3_pola.experiments.score.run_stored_cell` writing its rows to ``rows/``.
+    """One cell on a Ray worker: :func:`~sb3_pola.grid.run_stored_cell` writing its rows to ``rows/``.
 
     :param cell: (dataset, variant, seed)
-    :param config: the grid's :class:`~sb3_pola.experiments.score.Config` as a dict
+    :param config: the grid's :class:`~sb3_pola.grid.Config` as a dict
     :param out: output folder or fsspec URL, seen by every worker
     :param device: torch device
     :param threads: torch CPU threads (a fixed count: results on CPU depend on it)
@@ -158,14 +88,12 @@ def cell_task(
     """
     import torch as th
 
-    from sb3_pola.experiments.storage import open_workspace
-
     os.environ.update(environ)
     th.set_num_threads(threads)
     with open_workspace(out) as view:  # a URL: a scratch folder of this task's own
         if view.exists(marker_path(view.folder, cell)):  # finished by its dynamics-fit task (a one-step budget) or a retry
             return True
-        return score.run_stored_cell(view, *cell, score.Config(**config), device, verbose, stop_after_dynamics)
+        return run_stored_cell(view, *cell, Config(**config), device, verbose, stop_after_dynamics)
 
 
 def _error_text(error: BaseException) -> str:
@@ -177,9 +105,7 @@ def _error_text(error: BaseException) -> str:
     return f"{type(error).__name__}: {error}"
 
 
-def _submit_cells(
-    submit: Callable[..., Any], todo: list[Cell], config: score.Config, view: Workspace
-) -> tuple[dict[Any, str], int]:
+def _submit_cells(submit: Callable[..., Any], todo: list[Cell], config: Config, view: Workspace) -> tuple[dict[Any, str], int]:
     """Start the dynamics-fit tasks, then every cell, each after the fit of the dynamics model it uses.
 
     :param submit: starts a :func:`cell_task` of ``(name, cell, stop_after_dynamics, *tasks_to_wait_for)``
@@ -192,13 +118,13 @@ def _submit_cells(
     pending: dict[Any, str] = {}
     fits: dict[pathlib.Path, Any] = {}
     for path, cell in plan_dynamics_fits(todo, config, out, view.exists).items():
-        name = f"{score.cell_name(*cell)} (dynamics fit)"
+        name = f"{cell_name(*cell)} (dynamics fit)"
         fits[path] = submit(name, cell, True)
         pending[fits[path]] = name
     for cell in todo:
-        name = score.cell_name(*cell)
-        fit = fits.get(score.dynamics_path(out, cell[0], cell[2], config))
-        after = [fit] if fit is not None and score.needs_dynamics(cell[1], config) else []
+        name = cell_name(*cell)
+        fit = fits.get(dynamics_path(out, cell[0], cell[2], config))
+        after = [fit] if fit is not None and needs_dynamics(cell[1], config) else []
         pending[submit(name, cell, False, *after)] = name
     return pending, len(fits)
 
@@ -233,7 +159,7 @@ def _wait_for_cells(
             merge_rows(view, cells)
             last_merge = now
         if now - last_report >= REPORT_INTERVAL and pending:
-            score.publish_reports(view, variants, info)
+            publish_reports(view, variants, info)
             last_report = now
     return failures
 
@@ -241,7 +167,7 @@ def _wait_for_cells(
 def run_grid(
     args: argparse.Namespace,
     cells: list[Cell],
-    config: score.Config,
+    config: Config,
     info: dict[str, Any],
     view: Workspace,
     device: str,
@@ -270,7 +196,7 @@ def run_grid(
     if args.verbose:
         for cell in cells:
             if cell not in todo:
-                print(f"[score] {score.cell_name(*cell)}: done, skipped")
+                print(f"[score] {cell_name(*cell)}: done, skipped")
     view.pull("scores.csv")
     view.pull_tree("rows")
     adopt_rows(out, todo)
@@ -298,7 +224,7 @@ def run_grid(
         if started:
             ray.shutdown()
     merge_rows(view, cells)
-    score.publish_reports(view, args.variants, info)
+    publish_reports(view, args.variants, info)
     if failures:
         print(f"[score] {len(failures)} task(s) failed: " + ", ".join(name for name, _ in failures), file=sys.stderr)
         print("[score] the same command resumes them (finished cells are skipped)", file=sys.stderr)

@@ -15,7 +15,7 @@ mean return over ``--ref-episodes`` (>= 10) episodes. Written with
 ``$MINARI_DATASETS_PATH`` as ``<envname>/<kind>-v<version>``.
 
 Gymnasium-Robotics point mazes (``--env PointMaze_UMaze-v3`` etc.) have their own kinds and
-options: :mod:`sb3_pola.collect_maze` (``sb3-pola collect --env PointMaze_UMaze-v3 --help``).
+options: :mod:`sb3_pola.collect.maze` (``sb3-pola collect --env PointMaze_UMaze-v3 --help``).
 
 Example::
 
@@ -30,25 +30,19 @@ import contextlib
 import copy
 import dataclasses
 import json
-import os
 import pathlib
-import shutil
 import sys
-import tempfile
 import time
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.envs.registration import EnvSpec
+
+from sb3_pola.collect.episodes import PolicyFn, evaluate, policy_fn, progress_bar, rollout
+from sb3_pola.collect.writer import MIN_REF_EPISODES, dataset_summary, datasets_root, default_name, write_dataset
 
 KINDS = ("random", "medium", "expert", "medium-replay", "medium-expert")
-MIN_REF_EPISODES = 10
-
-# observation (an array, or a dict of arrays for Dict spaces) -> action in env units
-PolicyFn = Callable[[Any], np.ndarray]
 
 
 @dataclass
@@ -59,117 +53,6 @@ class Checkpoint:
     mean_return: float
     policy_state: dict[str, Any]
     replay_pos: int
-
-
-def _progress(total: int, desc: str, enabled: bool) -> Any:
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc, disable=not enabled, leave=False, file=sys.stderr)
-
-
-@contextlib.contextmanager
-def _env_var(name: str, value: str) -> Iterator[None]:
-    old = os.environ.get(name)
-    os.environ[name] = value
-    try:
-        yield
-    finally:
-        if old is None:
-            os.environ.pop(name, None)
-        else:
-            os.environ[name] = old
-
-
-def default_name(env_id: str) -> str:
-    """``InvertedPendulum-v5`` -> ``invertedpendulum``."""
-    return env_id.split("/")[-1].rsplit("-v", 1)[0].lower()
-
-
-def _stack(observations: list[Any]) -> Any:
-    """Stack per-step observations; Dict ones key by key, the layout Minari's episode buffers take."""
-    if isinstance(observations[0], dict):
-        return {key: _stack([obs[key] for obs in observations]) for key in observations[0]}
-    return np.asarray(observations)
-
-
-def rollout(
-    env: gym.Env, policy: PolicyFn | None, n_steps: int, seed: int, progress: bool = False, desc: str = "rollout"
-) -> list[Any]:
-    """Record exactly ``n_steps`` transitions as Minari episode buffers.
-
-    Episodes end on termination or on the env's time limit (truncation); the last one, cut by the
-    step budget, is marked truncated.
-
-    :param env: environment (with its TimeLimit)
-    :param policy: observation -> action in env units; None for uniform random actions
-    :param n_steps: transitions to record
-    :param seed: seed of the first reset and of the action space
-    :return: list of ``minari.data_collector.EpisodeBuffer``
-    """
-    from minari.data_collector import EpisodeBuffer
-
-    env.action_space.seed(seed)
-    episodes: list[Any] = []
-    obs, _ = env.reset(seed=seed)
-    ep_obs, ep_act, ep_rew, ep_term, ep_trunc = [obs], [], [], [], []
-    with _progress(n_steps, desc, progress) as bar:
-        for step in range(n_steps):
-            action = env.action_space.sample() if policy is None else policy(obs)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            last = step == n_steps - 1
-            ep_obs.append(obs)
-            ep_act.append(np.asarray(action, dtype=np.float32))
-            ep_rew.append(float(reward))
-            ep_term.append(bool(terminated))
-            ep_trunc.append(bool(truncated) or (last and not terminated))
-            bar.update(1)
-            if terminated or truncated or last:
-                episodes.append(
-                    EpisodeBuffer(
-                        id=len(episodes),
-                        observations=_stack(ep_obs),
-                        actions=np.asarray(ep_act),
-                        rewards=np.asarray(ep_rew),
-                        terminations=np.asarray(ep_term),
-                        truncations=np.asarray(ep_trunc),
-                    )
-                )
-                if not last:
-                    obs, _ = env.reset()
-                    ep_obs, ep_act, ep_rew, ep_term, ep_trunc = [obs], [], [], [], []
-    return episodes
-
-
-def run_episodes(env: gym.Env, policy: PolicyFn | None, n_episodes: int, seed: int) -> tuple[list[float], list[bool]]:
-    """Undiscounted returns of ``n_episodes`` full episodes, and whether each had a step with ``info["success"]``."""
-    env.action_space.seed(seed)
-    returns, successes = [], []
-    for episode in range(n_episodes):
-        obs, _ = env.reset(seed=seed + episode)
-        done, total, success = False, 0.0, False
-        while not done:
-            action = env.action_space.sample() if policy is None else policy(obs)
-            obs, reward, terminated, truncated, info = env.step(action)
-            total += float(reward)
-            success = success or bool(info.get("success", False))
-            done = terminated or truncated
-        returns.append(total)
-        successes.append(success)
-    return returns, successes
-
-
-def evaluate(env: gym.Env, policy: PolicyFn | None, n_episodes: int, seed: int) -> list[float]:
-    """Undiscounted returns of ``n_episodes`` full episodes."""
-    return run_episodes(env, policy, n_episodes, seed)[0]
-
-
-def policy_fn(model: Any, deterministic: bool) -> PolicyFn:
-    """Observation -> env-unit action of an SB3 model (``predict`` unscales and clips)."""
-
-    def act(obs: np.ndarray) -> np.ndarray:
-        return model.predict(obs, deterministic=deterministic)[0]
-
-    return act
 
 
 def load_policy(path: str, algo: str, env: gym.Env) -> Any:
@@ -213,7 +96,7 @@ def train_sac(
             self.bar: Any = None
 
         def _on_training_start(self) -> None:
-            self.bar = _progress(train_steps, f"SAC {env_id}", progress)
+            self.bar = progress_bar(train_steps, f"SAC {env_id}", progress)
 
         def _on_training_end(self) -> None:
             self.bar.close()
@@ -299,111 +182,6 @@ def replay_episodes(model: Any, end: int) -> list[Any]:
         )
         start = stop
     return episodes
-
-
-def _repack(data_dir: pathlib.Path, extra_metadata: dict[str, Any] | None = None) -> None:
-    """Rewrite minari's HDF5 file with contiguous datasets (and add ``extra_metadata`` to its metadata).
-
-    Minari writes every episode's arrays as resizable chunked datasets, ~14 kB of overhead per
-    episode; contiguous ones need ~2 kB, which keeps short-episode datasets (random,
-    medium-replay) several times smaller. The layout is the same, so minari reads it as before.
-    """
-    import h5py
-
-    src = data_dir / "main_data.hdf5"
-    tmp = data_dir / "main_data.hdf5.tmp"
-
-    def copy_group(group_in: Any, group_out: Any) -> None:
-        group_out.attrs.update(group_in.attrs)
-        for key, value in group_in.items():
-            if isinstance(value, h5py.Group):
-                copy_group(value, group_out.create_group(key, track_order=True))
-            else:
-                group_out.create_dataset(key, data=value[()])
-
-    with h5py.File(src, "r") as file_in, h5py.File(tmp, "w", track_order=True) as file_out:
-        copy_group(file_in, file_out)
-    os.replace(tmp, src)
-    metadata_file = data_dir / "metadata.json"
-    metadata = json.loads(metadata_file.read_text())
-    metadata.update(extra_metadata or {})
-    metadata["dataset_size"] = round(src.stat().st_size / 1e6, 1)  # MB, as minari computes it
-    metadata_file.write_text(json.dumps(metadata))
-
-
-def write_dataset(
-    out_root: pathlib.Path,
-    dataset_id: str,
-    episodes: list[Any],
-    env_id: str | EnvSpec,
-    ref_min: float,
-    ref_max: float,
-    ref_episodes: int,
-    algorithm_name: str,
-    description: str,
-    overwrite: bool,
-    eval_env: str | EnvSpec | None = None,
-    extra_metadata: dict[str, Any] | None = None,
-    code_permalink: str = "sb3_pola/collect.py",
-) -> pathlib.Path:
-    """Create the Minari dataset in a temporary root, then move it in place (no half-written dataset).
-
-    :param env_id: the env the data was recorded in (id or spec: its ``env_spec``)
-    :param eval_env: the env to evaluate in (its ``eval_env_spec``); default ``env_id``
-    :param extra_metadata: more keys for ``metadata.json``
-    :param code_permalink: the code that made the data
-    """
-    import minari
-
-    target = out_root / dataset_id
-    if target.exists():
-        if not overwrite:
-            raise FileExistsError(f"{target} exists: pass --overwrite to replace it")
-        shutil.rmtree(target)
-    out_root.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=out_root, prefix=".collect-") as tmp, _env_var("MINARI_DATASETS_PATH", tmp):
-        minari.create_dataset_from_buffers(
-            dataset_id=dataset_id,
-            buffer=episodes,
-            env=env_id,
-            eval_env=env_id if eval_env is None else eval_env,
-            algorithm_name=algorithm_name,
-            author="sb3-pola collect",
-            author_email="none@example.org",
-            code_permalink=code_permalink,
-            ref_min_score=ref_min,
-            ref_max_score=ref_max,
-            num_episodes_average_score=ref_episodes,
-            description=description,
-            data_format="hdf5",
-        )
-        _repack(pathlib.Path(tmp) / dataset_id / "data", extra_metadata)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(pathlib.Path(tmp) / dataset_id, target)
-        if "/" in dataset_id:  # minari's namespace file, which `minari list local` expects
-            namespace = dataset_id.split("/")[0]
-            ns_file = pathlib.Path(tmp) / namespace / "namespace_metadata.json"
-            if ns_file.exists() and not (out_root / namespace / ns_file.name).exists():
-                shutil.copy(ns_file, out_root / namespace / ns_file.name)
-    return target
-
-
-def dataset_summary(path: pathlib.Path, episodes: list[Any]) -> dict[str, Any]:
-    """Path, steps, episodes, mean return and size on disk of a written dataset, for the printed summary."""
-    returns = [float(np.sum(e.rewards)) for e in episodes]
-    return {
-        "path": str(path),
-        "steps": int(sum(len(e.rewards) for e in episodes)),
-        "episodes": len(episodes),
-        "mean_return": float(np.mean(returns)),
-        "bytes": sum(p.stat().st_size for p in path.rglob("*") if p.is_file()),
-    }
-
-
-def datasets_root(out: str | None) -> pathlib.Path:
-    """``--out``, else ``$MINARI_DATASETS_PATH``, else ``~/.minari/datasets``, as an absolute path."""
-    root = pathlib.Path(out or os.environ.get("MINARI_DATASETS_PATH") or pathlib.Path.home() / ".minari" / "datasets")
-    return root.expanduser().resolve()  # minari mangles relative dataset paths (get_size joins them twice)
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -609,14 +387,7 @@ def _record_kind(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``sb3-pola collect`` / ``python -m sb3_pola.collect`` (point mazes: :mod:`sb3_pola.collect_maze`)."""
-    from sb3_pola import collect_maze
-
-    argv = list(sys.argv[1:] if argv is None else argv)
-    peek = argparse.ArgumentParser(add_help=False)
-    peek.add_argument("--env")
-    if collect_maze.is_maze_env(peek.parse_known_args(argv)[0].env):
-        return collect_maze.main(argv)
+    """``sb3-pola collect`` for a MuJoCo (any continuous-action Gymnasium) env; returns the exit code."""
     args = make_parser().parse_args(argv)
     if args.ref_episodes < MIN_REF_EPISODES:
         print(f"--ref-episodes must be >= {MIN_REF_EPISODES}", file=sys.stderr)
@@ -663,7 +434,3 @@ def main(argv: list[str] | None = None) -> int:
     summary["seconds"] = round(time.perf_counter() - start_time, 1)
     print(json.dumps(summary, indent=2))
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

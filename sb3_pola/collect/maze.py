@@ -50,15 +50,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.envs.registration import EnvSpec
 
-from sb3_pola.cli import missing_extra_message
-from sb3_pola.collect import (
-    MIN_REF_EPISODES,
-    dataset_summary,
-    datasets_root,
-    rollout,
-    run_episodes,
-    write_dataset,
-)
+from sb3_pola.collect.episodes import rollout, run_episodes
+from sb3_pola.collect.writer import MIN_REF_EPISODES, dataset_summary, datasets_root, write_dataset
+from sb3_pola.common.extras import missing_extra_message
 
 KINDS = ("planner", "random")
 MAZE_PREFIX = "PointMaze_"
@@ -243,7 +237,7 @@ def make_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``sb3-pola collect --env PointMaze_...`` / ``python -m sb3_pola.collect_maze``."""
+    """Entry point of ``sb3-pola collect --env PointMaze_...`` / ``python -m sb3_pola.collect.maze``."""
     args = make_parser().parse_args(argv)
     if args.ref_episodes < MIN_REF_EPISODES:
         print(f"--ref-episodes must be >= {MIN_REF_EPISODES}", file=sys.stderr)
@@ -316,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
             args.overwrite,
             eval_env=eval_spec,
             extra_metadata=extra,
-            code_permalink="sb3_pola/collect_maze.py",
+            code_permalink="sb3_pola/collect/maze.py",
         )
         summary["datasets"][dataset_id] = {**dataset_summary(path, episodes), **extra}
     summary["seconds"] = round(time.perf_counter() - start_time, 1)
