@@ -43,6 +43,7 @@ test-all: $(STAMP)
 lint: $(STAMP)
 	$(PY) -m ruff check sb3_pola tests experiments
 	$(PY) -m ruff format --check sb3_pola tests experiments
+	$(VENV)/bin/lint-imports
 	@for f in $$(git ls-files 'experiments/*.sh'); do bash -n "$$f" || exit 1; done
 
 format: $(STAMP)
