@@ -199,7 +199,7 @@ def source_fingerprint() -> str:
 
 def checkpoint_step(path: pathlib.Path) -> int | None:
     """The step of a valid checkpoint, ``None`` if there is none; raises if the file is broken."""
-    from sb3_pola.common.errors import validate_model_file
+    from sb3_pola.common.integrity import validate_model_file
 
     if not path.is_file():
         return None

@@ -29,7 +29,7 @@ from sb3_pola.common.checkpoint import (
     save_module_state,
 )
 from sb3_pola.common.datasets import OfflineDataset
-from sb3_pola.common.errors import DivergenceError, ModelFileError, validate_model_file
+from sb3_pola.common.integrity import DivergenceError, ModelFileError, validate_model_file
 from sb3_pola.pola.pola import POLA
 
 make_model = make_light_model  # POLA, light config, CPU, decaying learning rate: what the soak workers train

@@ -18,12 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from sb3_pola.common.scores import success_rate, update_success
+from sb3_pola.common.metrics import success_rate, update_success
 from sb3_pola.pola.pola import PAPER_FORM
 
 # Light enough for a 2-core CPU in a few minutes; the paper's configuration is `PAPER_CONFIG` (needs a GPU). Both
-# use the paper's form of the Q term (PAPER_FORM): on the shipped InvertedPendulum data the Q term must pull hard
-# and early to lift the actor within 6,000 steps, which the package defaults (tuned on locomotion) do not.
+# use the paper's form of the Q term (PAPER_FORM); why: docs/results.md, "The main job".
 LIGHT_CONFIG: dict[str, Any] = dict(
     **PAPER_FORM,
     n_critics=4,
@@ -91,7 +90,7 @@ def plot_curve(
 
 def success_tracker() -> tuple[Callable[[dict[str, Any], dict[str, Any]], None], list[bool | None]]:
     """An ``evaluate_policy`` callback and the list it fills: per finished episode, whether a step's info reported
-    success (:func:`~sb3_pola.common.scores.update_success`), else ``None``.
+    success (:func:`~sb3_pola.common.metrics.update_success`), else ``None``.
     """
     episodes: list[bool | None] = []
     current: dict[int, bool | None] = {}

@@ -9,6 +9,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from sb3_pola.common.evaluation import episode_returns
+
 # observation (an array, or a dict of arrays for Dict spaces) -> action in env units
 PolicyFn = Callable[[Any], np.ndarray]
 
@@ -75,21 +77,15 @@ def rollout(
 
 
 def run_episodes(env: gym.Env, policy: PolicyFn | None, n_episodes: int, seed: int) -> tuple[list[float], list[bool]]:
-    """Undiscounted returns of ``n_episodes`` full episodes, and whether each had a step with ``info["success"]``."""
+    """Undiscounted returns of ``n_episodes`` full episodes (the action space seeded with ``seed``, episode ``i`` reset
+    with ``seed + i``), and whether each succeeded (:func:`~sb3_pola.common.metrics.update_success`'s rule).
+
+    :param policy: observation -> action in env units; None for uniform random actions
+    """
     env.action_space.seed(seed)
-    returns, successes = [], []
-    for episode in range(n_episodes):
-        obs, _ = env.reset(seed=seed + episode)
-        done, total, success = False, 0.0, False
-        while not done:
-            action = env.action_space.sample() if policy is None else policy(obs)
-            obs, reward, terminated, truncated, info = env.step(action)
-            total += float(reward)
-            success = success or bool(info.get("success", False))
-            done = terminated or truncated
-        returns.append(total)
-        successes.append(success)
-    return returns, successes
+    successes: list[bool | None] = []
+    returns = episode_returns(env, policy or (lambda _obs: env.action_space.sample()), n_episodes, seed, successes)
+    return [float(r) for r in returns], [bool(s) for s in successes]
 
 
 def evaluate(env: gym.Env, policy: PolicyFn | None, n_episodes: int, seed: int) -> list[float]:

@@ -28,7 +28,7 @@ import numpy as np
 
 from sb3_pola.common.dataset_cache import ARRAY_FIELDS, cache_path, fingerprint, load_cache, save_cache
 from sb3_pola.common.dict_obs import check_dict_space, flat_space, flatten_env, flatten_episode_observations
-from sb3_pola.common.scores import normalized_score
+from sb3_pola.common.metrics import normalized_score
 
 if TYPE_CHECKING:
     from minari import MinariDataset

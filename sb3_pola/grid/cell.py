@@ -19,7 +19,7 @@ from stable_baselines3.common.logger import CSVOutputFormat, Logger
 from sb3_pola.common.checkpoint import load_module_state, load_or_make, save_checkpoint, save_module_state
 from sb3_pola.common.datasets import make_env
 from sb3_pola.common.evaluation import evaluate
-from sb3_pola.common.scores import success_rate
+from sb3_pola.common.metrics import success_rate
 from sb3_pola.grid.rows import append_row, cell_name, read_rows, rows_rel, slug, write_rows
 from sb3_pola.grid.variants import VARIANTS, Config, apply_eval_rule, pola_kwargs
 from sb3_pola.pola import POLA

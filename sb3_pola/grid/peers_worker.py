@@ -2,7 +2,7 @@
 
 This file is a script, not part of the package's import graph: it imports only the standard
 library, numpy, gymnasium, torch and d3rlpy (never ``sb3_pola``; the normalised score comes from
-``sb3_pola/common/scores.py``, loaded by its path), so the separate virtual environment that holds d3rlpy
+``sb3_pola/common/metrics.py``, loaded by its path), so the separate virtual environment that holds d3rlpy
 can run it directly::
 
     .venv-peers/bin/python peers_worker.py --npz data.npz --algo td3bc --seed 0 --steps 10000 \\
@@ -322,8 +322,8 @@ def evaluate(
 
 
 def _load_scores_module() -> Any:
-    """``sb3_pola/common/scores.py`` (NumPy only), loaded by its path: this venv cannot import ``sb3_pola`` itself."""
-    path = pathlib.Path(__file__).resolve().parents[1] / "common" / "scores.py"
+    """``sb3_pola/common/metrics.py`` (NumPy only), loaded by its path: this venv cannot import ``sb3_pola`` itself."""
+    path = pathlib.Path(__file__).resolve().parents[1] / "common" / "metrics.py"
     spec = importlib.util.spec_from_file_location("_sb3_pola_scores", path)
     assert spec is not None and spec.loader is not None, f"no {path}"
     module = importlib.util.module_from_spec(spec)

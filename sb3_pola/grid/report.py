@@ -183,8 +183,6 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
         "T3-noproducts": "tab:cyan",
         "T0-noproducts": "tab:olive",
         "T3-criticproducts": "tab:purple",
-        "T3-floor": "tab:brown",
-        "T0-floor": "tab:pink",
         "BC": "tab:gray",
     }
     for dataset in dict.fromkeys(r["dataset"] for r in rows):

@@ -20,9 +20,6 @@ import torch as th
 from sb3_pola.common.schedules import WarmupSchedule
 from sb3_pola.pola import PAPER_FORM, POLA
 
-# POLA arguments of the weakened Q term of issue #12 (part of the defaults since 2026-12-02; the paper's form, the
-# defaults before, is sb3_pola.PAPER_FORM)
-FLOOR_FORM: dict[str, Any] = {"lookahead_normalization": "weights", "q_scale_floor": "auto"}
 # name -> (label for legends, POLA keyword arguments, policy_kwargs)
 VARIANTS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     "T0": ("POLA T=0 (no look-ahead)", {"rollout_length": 0}, {}),
@@ -33,14 +30,11 @@ VARIANTS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     "T3-noproducts": ("T=3, no products", {"rollout_length": 3, "use_state_products": False}, {}),
     "T3-criticproducts": ("T=3, products in actor and critic", {"rollout_length": 3}, {"critic_state_products": True}),
     "BC": ("BC (diffusion actor, eta=0)", {"rollout_length": 0, "eta": 0.0}, {}),
-    # the weakened Q term of issue #12: |Q| floored at the dataset's value scale, look-ahead sum / sum gamma^i
-    "T0-floor": ("T=0, Q-scale floor", {"rollout_length": 0, **FLOOR_FORM}, {}),
-    "T3-floor": ("T=3, Q-scale floor, weights normalised", {"rollout_length": 3, **FLOOR_FORM}, {}),
 }
 ALL_VARIANTS = list(VARIANTS)
 # the variants of each figure (paper Fig. 3 and Fig. 4); BC is drawn in both as the floor
 FIGURES: dict[str, list[str]] = {
-    "rollout": ["T0", "T1", "T3", "T5", "T3-floor", "BC"],
+    "rollout": ["T0", "T1", "T3", "T5", "BC"],
     "products": ["T3", "T3-noproducts", "T3-criticproducts", "T0", "T0-noproducts", "BC"],
 }
 # POLA's numbers in the paper's Table I (D4RL MuJoCo v2, mean +- std over 10 replications)
