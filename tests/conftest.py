@@ -1,14 +1,49 @@
 """Shared fixtures: tiny Minari datasets written into temporary folders (never the user's home).
 
-The functions that make the datasets live in ``tests/helpers.py``."""
+The whole run gets a temporary ``HOME`` (and cache, Minari and XDG cache folders) before any fixture runs, module- and
+session-scoped ones included; the user's real ``~/.cache/sb3_pola`` and ``~/.minari`` are checked unchanged at the
+end. The functions that make the datasets live in ``tests/helpers.py``."""
 
 from __future__ import annotations
 
+import os
 import pathlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import pytest
 from helpers import make_episodes, record_random_dataset, write_minari_dataset
+
+# the user's home as the run found it: nothing may be written below these
+REAL_HOME = pathlib.Path(os.path.expanduser("~"))
+GUARDED = (REAL_HOME / ".cache" / "sb3_pola", REAL_HOME / ".minari")
+
+
+def _snapshot(folders: tuple[pathlib.Path, ...]) -> dict[str, int]:
+    """Every file below ``folders``, with its modification time."""
+    return {str(p): p.stat().st_mtime_ns for folder in folders if folder.exists() for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _home_untouched() -> Iterator[None]:
+    """Fails the run (an error at the last test's teardown) if a test wrote into the user's cache or Minari folder."""
+    before = _snapshot(GUARDED)
+    yield
+    written = sorted(path for path, mtime in _snapshot(GUARDED).items() if before.get(path) != mtime)
+    assert not written, f"the tests wrote into the user's home: {written[:5]}"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _isolated_home(_home_untouched: None, tmp_path_factory: pytest.TempPathFactory) -> Iterator[pathlib.Path]:
+    """A temporary ``HOME`` for the whole run (session scope: set up before every module fixture), the cache and
+    datasets roots below it; the environment is restored afterwards."""
+    home = tmp_path_factory.mktemp("home")
+    patch = pytest.MonkeyPatch()
+    patch.setenv("HOME", str(home))
+    patch.setenv("XDG_CACHE_HOME", str(home / ".cache"))
+    patch.setenv("SB3_POLA_CACHE_DIR", str(home / ".cache" / "sb3_pola"))
+    patch.setenv("MINARI_DATASETS_PATH", str(home / ".minari" / "datasets"))
+    yield home
+    patch.undo()
 
 
 @pytest.fixture(autouse=True)

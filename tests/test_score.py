@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import pathlib
 
 import numpy as np
@@ -67,6 +68,14 @@ def test_score_end_to_end_and_skip(pendulum_root: pathlib.Path, tmp_path: pathli
     assert len(grid_rows.read_rows(out / "scores.csv")) == 12
     # another budget in the same folder is refused
     assert run(pendulum_root, out, "--variants", "T0", "--seeds", "0", "--steps", "9") == 2
+
+
+def test_data_dir_is_restored(pendulum_root: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    """``--data-dir`` sets MINARI_DATASETS_PATH for the command only."""
+    before = os.environ["MINARI_DATASETS_PATH"]
+    assert before != str(pendulum_root)
+    assert run(pendulum_root, tmp_path / "out", "--variants", "T0", "--seeds", "0", "--dry-run") == 0
+    assert os.environ["MINARI_DATASETS_PATH"] == before
 
 
 def test_score_resumes_an_interrupted_run(
