@@ -106,6 +106,21 @@ def slow_down_checkpoint_writes(stage: str, delay: float, marker: pathlib.Path) 
     return undo
 
 
+def pause_at(step: int, marker: pathlib.Path, delay: float = 600.0) -> Any:
+    """A callback that, once training reaches gradient step ``step`` (its checkpoint, if any, written first), writes
+    ``marker`` and sleeps ``delay`` seconds: the parent kills the process there, at a step it chose."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class PauseAt(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps == step:
+                marker.write_text(str(step))
+                time.sleep(delay)
+            return True
+
+    return PauseAt()
+
+
 def run_worker(args: argparse.Namespace) -> int:
     """Train to ``--total`` steps, resuming from ``--dir`` if a checkpoint is there; save ``--final`` at the end."""
     import torch as th
@@ -124,6 +139,7 @@ def run_worker(args: argparse.Namespace) -> int:
         save_path=args.dir,
         save_freq=args.save_freq,
         load_kwargs=dict(dataset=args.dataset, device="cpu"),
+        callback=pause_at(args.pause_at, pathlib.Path(args.pause_marker)) if args.pause_at is not None else None,
         log_interval=0,
     )
     if undo is not None:
@@ -477,6 +493,8 @@ def main(argv: list[str] | None = None) -> int:
     worker.add_argument("--write-delay", type=float, default=0.0, help="sleep inside every checkpoint write (tests)")
     worker.add_argument("--write-marker", default=None)
     worker.add_argument("--write-stage", choices=["before_replace", "mid_zip"], default="before_replace")
+    worker.add_argument("--pause-at", type=int, default=None, help="sleep at this gradient step, to be killed (tests)")
+    worker.add_argument("--pause-marker", default=None, help="file written when the pause starts")
     soak = sub.add_parser("soak", help="kill and resume in a loop, compare with an uninterrupted run")
     soak.add_argument("--minutes", type=float, default=60.0)
     soak.add_argument("--total", type=int, default=5000)

@@ -137,6 +137,7 @@ def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
 
 # about 30 s on an idle 2-core machine; with other jobs holding the cores, Ray's workers (nice 15) get little CPU
 # and it once needed more than the suite's 600 s, hence its own timeout
+@pytest.mark.slow  # Ray workers; the cell task's side: test_a_cell_task_after_its_dynamics_fit_is_the_sequential_cell
 @pytest.mark.timeout(1500)
 def test_ray_grid_equals_sequential_and_recovers(
     data_root: pathlib.Path,
@@ -178,6 +179,7 @@ def test_ray_grid_equals_sequential_and_recovers(
     assert not list((distributed / "ckpt").glob("*.zip"))
 
 
+@pytest.mark.slow  # Ray workers; the storage side: tests/test_storage.py
 @pytest.mark.timeout(1500)
 def test_ray_grid_into_a_url(
     data_root: pathlib.Path, local_ray: pathlib.Path, sequential: pathlib.Path, tmp_path: pathlib.Path

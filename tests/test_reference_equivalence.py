@@ -327,6 +327,7 @@ def test_compiled_mish_equals_mish():
     _close(FusedMish()(x), F.mish(x))
 
 
+@pytest.mark.slow  # torch.compile for minutes; the fallback path: test_compile_update_falls_back_to_eager
 @pytest.mark.parametrize("cudagraph_path, critic_diversity", [(False, 0.0), (True, 0.0), (False, 0.5)])
 def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diversity):
     """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
