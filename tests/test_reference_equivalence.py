@@ -353,6 +353,7 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diver
         dynamics_kwargs={"n_members": 2, "n_elites": 2, "hidden_dim": 8, "n_layers": 1},
         critic_diversity=critic_diversity,
     )
+    counters.clear()  # a global count: another test's compilations must not make the first step's look like graphs
     eager, compiled = _model(**kwargs), _model(compile_update=True, **kwargs)
     compiled.policy.load_state_dict(eager.policy.state_dict())
     buffer = eager._setup_offline_data()
