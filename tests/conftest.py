@@ -11,7 +11,7 @@ import pathlib
 from collections.abc import Callable, Iterator
 
 import pytest
-from helpers import make_episodes, record_random_dataset, write_minari_dataset
+from helpers import SCORE_DATASETS, make_episodes, record_random_dataset, write_minari_dataset
 
 # the user's home as the run found it: nothing may be written below these
 REAL_HOME = pathlib.Path(os.path.expanduser("~"))
@@ -86,3 +86,20 @@ def make_dataset(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> Cal
 def pendulum_path(tmp_path_factory: pytest.TempPathFactory) -> str:
     """Path of ``pendulum/random-v0``: 600 steps of uniform random actions in Pendulum-v1 (read-only, one per session)."""
     return str(record_random_dataset(tmp_path_factory.mktemp("pendulum"), "pendulum/random-v0", "Pendulum-v1", 600))
+
+
+@pytest.fixture(scope="session")
+def score_data(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+    """The score grid's tests' datasets root (:data:`helpers.SCORE_DATASETS`; read-only, one per session)."""
+    root = tmp_path_factory.mktemp("score_data")
+    for seed, dataset in enumerate(SCORE_DATASETS):
+        record_random_dataset(root, dataset, "Pendulum-v1", 60, seed=seed, ref_scores=(-300.0, 0.0), max_episode_steps=30)
+    return root
+
+
+@pytest.fixture(autouse=True)
+def _score_data_path(_isolated_dirs: None, request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """MINARI_DATASETS_PATH at ``score_data`` in the tests that use it, for what they load themselves after a run
+    (``sb3-pola score --data-dir`` sets the variable for the command only)."""
+    if "score_data" in request.fixturenames:
+        monkeypatch.setenv("MINARI_DATASETS_PATH", str(request.getfixturevalue("score_data")))

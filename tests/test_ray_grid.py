@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 import torch as th
-from helpers import record_random_dataset
+from helpers import SCORE_DATASETS, TINY_GRID, comparable, same_models
 
 from sb3_pola.cli import score as score_cli
 from sb3_pola.grid import cell as grid_cell
@@ -21,12 +21,9 @@ from sb3_pola.grid import rows as grid_rows
 from sb3_pola.grid import variants as grid_variants
 from sb3_pola.pola import POLA
 
-DATASETS = ["test/pendulum-v0", "test/pendulum2-v0"]
+DATASETS = list(SCORE_DATASETS)
 VARIANTS = ["T0", "T1"]
-TINY = ["--steps", "20", "--eval-freq", "10", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
-TINY += ["--n-critics", "2", "--dynamics-steps", "4"]
-TINY += ["--dynamics-kwargs", '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}']
-TINY += ["--preset", "cpu", "--no-compile", "--device", "cpu", "--threads", "1", "-v", "0"]
+TINY = ["--steps", "20", "--eval-freq", "10", "--eval-episodes", "1", *TINY_GRID, "--threads", "1"]
 TINY += ["--datasets", *DATASETS, "--variants", *VARIANTS, "--seeds", "0"]
 # JSON {cell name: {"step": N, "action": "kill" | "raise"}}: read by the Ray workers' evaluations
 FAULTS_ENV = "SB3_POLA_TEST_FAULTS"
@@ -54,14 +51,6 @@ def install_faults() -> None:
         return real_evaluate(model, *args, **kwargs)
 
     grid_cell.run_cell, grid_cell.evaluate = run_cell, evaluate
-
-
-@pytest.fixture(scope="module")
-def data_root(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
-    root = tmp_path_factory.mktemp("ray_data")
-    for seed, dataset in enumerate(DATASETS):
-        record_random_dataset(root, dataset, "Pendulum-v1", 60, seed=seed, ref_scores=(-300.0, 0.0), max_episode_steps=30)
-    return root
 
 
 @pytest.fixture(scope="module")
@@ -113,26 +102,11 @@ def autogroup_nice(value: int | None) -> int | None:
 
 
 @pytest.fixture(scope="module")
-def sequential(data_root: pathlib.Path, local_ray: pathlib.Path, tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+def sequential(score_data: pathlib.Path, local_ray: pathlib.Path, tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
     """The sequential run of the grid (while the Ray workers warm up), the reference of the Ray runs."""
     out = tmp_path_factory.mktemp("sequential") / "out"
-    assert score_cli.main([*TINY, "--data-dir", str(data_root), "--out", str(out)]) == 0
+    assert score_cli.main([*TINY, "--data-dir", str(score_data), "--out", str(out)]) == 0
     return out
-
-
-def same_models(expected: pathlib.Path, models: pathlib.Path) -> None:
-    """The final models of ``models`` are those of ``expected``, bit for bit."""
-    names = sorted(p.name for p in expected.iterdir())
-    assert sorted(p.name for p in models.iterdir()) == names
-    for name in names:
-        expected_state = POLA.load(expected / name, device="cpu").policy.state_dict()
-        state = POLA.load(models / name, device="cpu").policy.state_dict()
-        assert all(th.equal(state[key], value) for key, value in expected_state.items()), name
-
-
-def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
-    """Rows without their wall-clock time."""
-    return [tuple(str(r[k]) for k in grid_rows.CSV_FIELDS if k != "wall_s") for r in rows]  # str: NaN success equals NaN
 
 
 # about 30 s on an idle 2-core machine; with other jobs holding the cores, Ray's workers (nice 15) get little CPU
@@ -140,7 +114,7 @@ def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
 @pytest.mark.slow  # Ray workers; the cell task's side: test_a_cell_task_after_its_dynamics_fit_is_the_sequential_cell
 @pytest.mark.timeout(1500)
 def test_ray_grid_equals_sequential_and_recovers(
-    data_root: pathlib.Path,
+    score_data: pathlib.Path,
     local_ray: pathlib.Path,
     sequential: pathlib.Path,
     tmp_path: pathlib.Path,
@@ -153,7 +127,7 @@ def test_ray_grid_equals_sequential_and_recovers(
     # one worker dies after the cell's first evaluation, another cell raises: the other two cells finish
     killed, broken = (grid_rows.cell_name(d, "T1", 0) for d in DATASETS)
     local_ray.write_text(json.dumps({killed: {"step": 20, "action": "kill"}, broken: {"step": 10, "action": "raise"}}))
-    command = [*TINY, "--data-dir", str(data_root), "--out", str(distributed), "--ray", "--max-retries", "0"]
+    command = [*TINY, "--data-dir", str(score_data), "--out", str(distributed), "--ray", "--max-retries", "0"]
     capsys.readouterr()
     assert score_cli.main(command) == 1
     err = capsys.readouterr().err
@@ -182,7 +156,7 @@ def test_ray_grid_equals_sequential_and_recovers(
 @pytest.mark.slow  # Ray workers; the storage side: tests/test_storage.py
 @pytest.mark.timeout(1500)
 def test_ray_grid_into_a_url(
-    data_root: pathlib.Path, local_ray: pathlib.Path, sequential: pathlib.Path, tmp_path: pathlib.Path
+    score_data: pathlib.Path, local_ray: pathlib.Path, sequential: pathlib.Path, tmp_path: pathlib.Path
 ) -> None:
     """--out file://...: every worker in its own scratch folder; a worker killed mid-cell is retried from the storage."""
     from sb3_pola.grid.storage import Storage
@@ -191,7 +165,7 @@ def test_ray_grid_into_a_url(
     killed = grid_rows.cell_name(DATASETS[0], "T1", 0)
     local_ray.write_text(json.dumps({killed: {"step": 20, "action": "kill"}}))  # once: the retry goes through
     grid = ["--datasets", DATASETS[0], "--max-retries", "1"]
-    assert score_cli.main([*TINY, "--data-dir", str(data_root), "--out", url, "--ray", *grid]) == 0
+    assert score_cli.main([*TINY, "--data-dir", str(score_data), "--out", url, "--ray", *grid]) == 0
     assert json.loads(local_ray.read_text()) == {}  # the worker did die (the fault is dropped just before)
     storage = Storage(url)
     local = tmp_path / "local"
@@ -209,10 +183,10 @@ def test_ray_grid_into_a_url(
 
 
 def test_a_cell_task_after_its_dynamics_fit_is_the_sequential_cell(
-    data_root: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
+    score_data: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The workers' side without Ray: the fit stops after step 1 with a checkpoint, the cell resumes from it."""
-    monkeypatch.setenv("MINARI_DATASETS_PATH", str(data_root))
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(score_data))
     threads = th.get_num_threads()
     th.set_num_threads(1)
     try:
@@ -238,10 +212,10 @@ def test_a_cell_task_after_its_dynamics_fit_is_the_sequential_cell(
 
 
 def test_missing_ray_says_which_extra(
-    data_root: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+    score_data: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
-    assert score_cli.main([*TINY, "--data-dir", str(data_root), "--out", str(tmp_path / "out"), "--ray"]) == 2
+    assert score_cli.main([*TINY, "--data-dir", str(score_data), "--out", str(tmp_path / "out"), "--ray"]) == 2
     err = capsys.readouterr().err
     assert 'sb3-pola score needs the "ray" extra: pip install "sb3_pola[ray]"' in err and "Traceback" not in err
     assert not (tmp_path / "out" / "scores.csv").exists()

@@ -9,7 +9,7 @@ import pathlib
 
 import numpy as np
 import pytest
-from helpers import record_random_dataset
+from helpers import TINY_GRID
 
 from sb3_pola.cli import score as score_cli
 from sb3_pola.grid import cell as grid_cell
@@ -19,33 +19,16 @@ from sb3_pola.grid import report as grid_report
 from sb3_pola.grid import rows as grid_rows
 from sb3_pola.grid import variants as grid_variants
 
-TINY = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
-TINY += [
-    "--n-critics",
-    "2",
-    "--dynamics-steps",
-    "4",
-    "--dynamics-kwargs",
-    '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}',
-]
-TINY += ["--preset", "cpu", "--no-compile", "--device", "cpu", "-v", "0"]
-
-
-@pytest.fixture(scope="module")
-def pendulum_root(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
-    """A Minari dataset ``test/pendulum-v0``: 2 random episodes of Pendulum-v1, truncated to 30 steps."""
-    root = tmp_path_factory.mktemp("score_data")
-    record_random_dataset(root, "test/pendulum-v0", "Pendulum-v1", 60, ref_scores=(-300.0, 0.0), max_episode_steps=30)
-    return root
+TINY = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", *TINY_GRID]
 
 
 def run(root: pathlib.Path, out: pathlib.Path, *extra: str) -> int:
     return score_cli.main([*TINY, "--data-dir", str(root), "--datasets", "test/pendulum-v0", "--out", str(out), *extra])
 
 
-def test_score_end_to_end_and_skip(pendulum_root: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture) -> None:
+def test_score_end_to_end_and_skip(score_data: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "out"
-    assert run(pendulum_root, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1") == 0
+    assert run(score_data, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1") == 0
     rows = grid_rows.read_rows(out / "scores.csv")
     # 3 variants x 2 seeds x evaluations at steps 3 and 6
     assert len(rows) == 12
@@ -63,23 +46,23 @@ def test_score_end_to_end_and_skip(pendulum_root: pathlib.Path, tmp_path: pathli
     assert config["steps"] == 6 and config["device"] == "cpu" and config["net_arch"] == [8]
     # the same command again: every run is skipped, nothing is added
     capsys.readouterr()
-    assert run(pendulum_root, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1", "-v", "1") == 0
+    assert run(score_data, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1", "-v", "1") == 0
     assert capsys.readouterr().out.count("done, skipped") == 6
     assert len(grid_rows.read_rows(out / "scores.csv")) == 12
     # another budget in the same folder is refused
-    assert run(pendulum_root, out, "--variants", "T0", "--seeds", "0", "--steps", "9") == 2
+    assert run(score_data, out, "--variants", "T0", "--seeds", "0", "--steps", "9") == 2
 
 
-def test_data_dir_is_restored(pendulum_root: pathlib.Path, tmp_path: pathlib.Path) -> None:
+def test_data_dir_is_restored(score_data: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``--data-dir`` sets MINARI_DATASETS_PATH for the command only."""
-    before = os.environ["MINARI_DATASETS_PATH"]
-    assert before != str(pendulum_root)
-    assert run(pendulum_root, tmp_path / "out", "--variants", "T0", "--seeds", "0", "--dry-run") == 0
+    before = str(tmp_path / "elsewhere")
+    monkeypatch.setenv("MINARI_DATASETS_PATH", before)
+    assert run(score_data, tmp_path / "out", "--variants", "T0", "--seeds", "0", "--dry-run") == 0
     assert os.environ["MINARI_DATASETS_PATH"] == before
 
 
 def test_score_resumes_an_interrupted_run(
-    pendulum_root: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
+    score_data: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     out = tmp_path / "out"
     real_evaluate = grid_cell.evaluate
@@ -93,11 +76,11 @@ def test_score_resumes_an_interrupted_run(
 
     monkeypatch.setattr(grid_cell, "evaluate", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        run(pendulum_root, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9")
+        run(score_data, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9")
     assert [r["step"] for r in grid_rows.read_rows(out / "scores.csv")] == [3]
     assert (out / "ckpt" / "test_pendulum-v0__T3-noproducts__seed0.zip").exists()
     monkeypatch.setattr(grid_cell, "evaluate", real_evaluate)
-    assert run(pendulum_root, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9") == 0
+    assert run(score_data, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9") == 0
     rows = grid_rows.read_rows(out / "scores.csv")
     assert [r["step"] for r in rows] == [3, 6, 9]
     assert rows[2]["wall_s"] >= rows[0]["wall_s"]
@@ -169,10 +152,10 @@ def test_presets_and_overrides() -> None:
         score_cli.parse_args(["--variants", "T7"])
 
 
-def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.Path, tmp_path: pathlib.Path) -> None:
+def test_cells_keep_statistics_and_models_and_reevaluate(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
     """Every cell writes its training statistics and keeps its final model; --reevaluate scores it under other rules."""
     out = tmp_path / "out"
-    assert run(pendulum_root, out, "--variants", "T1", "--seeds", "0", "--log-interval", "2") == 0
+    assert run(score_data, out, "--variants", "T1", "--seeds", "0", "--log-interval", "2") == 0
     name = "test_pendulum-v0__T1__seed0"
     train_rows = diagnostics.read_train_stats(out / "train" / name)
     assert [r["time/total_timesteps"] for r in train_rows] == [2, 4, 6]
@@ -220,7 +203,7 @@ def test_eta_warmup_from_json() -> None:
     assert grid_variants.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 0.0})["eta"] == 0.0  # BC stays BC
 
 
-def test_eval_rule_during_training(pendulum_root: pathlib.Path, tmp_path: pathlib.Path) -> None:
+def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
     """--eval-rule stochastic scores with one seeded sample of the chain and leaves training as it was."""
     import torch as th
 
@@ -232,8 +215,8 @@ def test_eval_rule_during_training(pendulum_root: pathlib.Path, tmp_path: pathli
     presets = grid_variants.PRESETS
     assert presets["cpu"].signature() == "05ed254249" and presets["paper"].signature() == "6863b1ac8a"
     base, sampled = tmp_path / "ema", tmp_path / "stochastic"
-    assert run(pendulum_root, base, "--variants", "T1", "--seeds", "0") == 0
-    assert run(pendulum_root, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0
+    assert run(score_data, base, "--variants", "T1", "--seeds", "0") == 0
+    assert run(score_data, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0
     assert json.loads((sampled / "config.json").read_text())["eval_rule"] == "stochastic"
     assert "evaluation rule `stochastic`" in (sampled / "table.md").read_text()
     name = "test_pendulum-v0__T1__seed0.zip"
@@ -244,7 +227,7 @@ def test_eval_rule_during_training(pendulum_root: pathlib.Path, tmp_path: pathli
     assert float(again["stochastic"]["mean_return"]) == pytest.approx(final["mean_return"])
     assert float(again["ema"]["mean_return"]) == pytest.approx(grid_rows.read_rows(base / "scores.csv")[-1]["mean_return"])
     with pytest.raises(ValueError, match="unknown evaluation rule"):
-        run(pendulum_root, tmp_path / "bad", "--variants", "T1", "--eval-rule", "best")
+        run(score_data, tmp_path / "bad", "--variants", "T1", "--eval-rule", "best")
 
 
 class _GoalEnv:

@@ -41,8 +41,9 @@ import numpy as np
 
 from sb3_pola.collect.episodes import PolicyFn, evaluate, policy_fn, progress_bar, rollout
 from sb3_pola.collect.writer import MIN_REF_EPISODES, dataset_summary, datasets_root, default_name, write_dataset
+from sb3_pola.common.datasets import D4RL_KINDS
 
-KINDS = ("random", "medium", "expert", "medium-replay", "medium-expert")
+KINDS = D4RL_KINDS
 
 
 @dataclass

@@ -37,6 +37,8 @@ if TYPE_CHECKING:
 DatasetLocation: TypeAlias = "str | os.PathLike[str] | MinariDataset"
 
 METADATA_FILE = "metadata.json"
+# D4RL's dataset kinds, as `sb3-pola collect` makes them (``<env>/<kind>-v<version>``)
+D4RL_KINDS = ("random", "medium", "expert", "medium-replay", "medium-expert")
 # Rows per chunk when computing statistics, so no full-size float64 temporary is made.
 _STATS_CHUNK = 65536
 

@@ -13,6 +13,20 @@ from typing import Any
 
 import numpy as np
 
+# the columns of one evaluation row: the score grid's scores.csv and the d3rlpy baselines' peers.csv
+EVALUATION_FIELDS = [
+    "dataset",
+    "variant",
+    "seed",
+    "step",
+    "score",
+    "score_std",
+    "mean_return",
+    "eval_episodes",
+    "wall_s",
+    "success",
+]
+
 _warned_no_ref: set[str] = set()
 
 
@@ -88,4 +102,19 @@ def success_rate(successes: Iterable[bool | None]) -> float | None:
     return float(np.mean(reported)) if reported else None
 
 
-__all__ = ["SUCCESS_KEYS", "has_reference_scores", "normalized_score", "normalized_scores", "success_rate", "update_success"]
+def evaluation_seed(seed: int) -> int:
+    """The reset seed of the first episode of every evaluation of a run of ``seed`` (episode ``i``: ``+ i``): the score
+    grid's and the d3rlpy baselines' protocol, so that both meet the same starts."""
+    return 10_000 * (seed + 1)
+
+
+__all__ = [
+    "EVALUATION_FIELDS",
+    "SUCCESS_KEYS",
+    "evaluation_seed",
+    "has_reference_scores",
+    "normalized_score",
+    "normalized_scores",
+    "success_rate",
+    "update_success",
+]

@@ -19,7 +19,7 @@ from stable_baselines3.common.logger import CSVOutputFormat, Logger
 from sb3_pola.common.checkpoint import load_module_state, load_or_make, save_checkpoint, save_module_state
 from sb3_pola.common.datasets import make_env
 from sb3_pola.common.evaluation import evaluate
-from sb3_pola.common.metrics import success_rate
+from sb3_pola.common.metrics import evaluation_seed, success_rate
 from sb3_pola.grid.rows import append_row, cell_name, read_rows, rows_rel, slug, write_rows
 from sb3_pola.grid.variants import VARIANTS, Config, apply_eval_rule, pola_kwargs
 from sb3_pola.pola import POLA
@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 def evaluation_scores(model: Any, env: Any, n_episodes: int, seed: int, deterministic: bool = True) -> dict[str, Any]:
     """The CSV columns of one evaluation of a cell's model (the resets of seed ``seed``'s protocol)."""
     successes: list[bool | None] = []
-    returns = evaluate(model, env, n_episodes, seed=10_000 * (seed + 1), deterministic=deterministic, successes=successes)
+    returns = evaluate(model, env, n_episodes, seed=evaluation_seed(seed), deterministic=deterministic, successes=successes)
     scores = np.array([_nan_if_none(model.normalized_score(r)) for r in returns], dtype=float)
     rate = success_rate(successes)
     return {

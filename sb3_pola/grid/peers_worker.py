@@ -51,8 +51,6 @@ from typing import Any
 
 import numpy as np
 
-# must match sb3_pola.grid.rows.CSV_FIELDS (a test checks it)
-CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s", "success"]
 VARIANT_NAMES = {"td3bc": "d3rlpy-TD3+BC", "iql": "d3rlpy-IQL", "bc": "d3rlpy-BC"}
 # the npz arrays of one transition each
 TRANSITION_FIELDS = ("observations", "actions", "rewards", "next_observations", "terminals", "timeouts")
@@ -334,6 +332,8 @@ def _load_scores_module() -> Any:
 # per-episode D4RL scores (NaN without reference scores) and the success rate: the package's one implementation
 _scores = _load_scores_module()
 normalized_scores, update_success, success_rate = _scores.normalized_scores, _scores.update_success, _scores.success_rate
+CSV_FIELDS = _scores.EVALUATION_FIELDS  # peers.csv: the columns of score's scores.csv
+evaluation_seed = _scores.evaluation_seed
 
 
 def eval_row(
@@ -341,7 +341,7 @@ def eval_row(
 ) -> dict[str, Any]:
     """One evaluation as a CSV row (``wall_s`` left to the caller): reset seeds ``10_000 * (seed + 1) + i``, as score's."""
     successes: list[bool | None] = []
-    returns = evaluate(algo, env, episodes, 10_000 * (seed + 1), meta["action_low"], meta["action_high"], successes)
+    returns = evaluate(algo, env, episodes, evaluation_seed(seed), meta["action_low"], meta["action_high"], successes)
     scores = normalized_scores(returns, meta.get("ref_min_score"), meta.get("ref_max_score"))
     rate = success_rate(successes)
     return {

@@ -10,11 +10,13 @@ import pathlib
 import re
 from typing import TYPE_CHECKING, Any
 
+from sb3_pola.common.metrics import EVALUATION_FIELDS
+
 if TYPE_CHECKING:
     from sb3_pola.grid.storage import Workspace
 
 
-CSV_FIELDS = ["dataset", "variant", "seed", "step", "score", "score_std", "mean_return", "eval_episodes", "wall_s", "success"]
+CSV_FIELDS = EVALUATION_FIELDS  # scores.csv
 REEVAL_FIELDS = ["dataset", "variant", "seed", "rule", "step", "score", "score_std", "mean_return", "eval_episodes", "success"]
 Cell = tuple[str, str, int]
 
