@@ -189,7 +189,9 @@ def record_random_dataset(
 
 
 def light_kwargs(**overrides) -> dict:
-    """A configuration small enough for unit tests on a CPU."""
+    """The tests' one light configuration: small enough for unit tests on a CPU, with every part of POLA (dynamics
+    model, look-ahead, EMA). tests/soak.py builds on it; the main job's ``LIGHT_CONFIG`` (sb3_pola/cli/run.py) is a
+    run's configuration (its numbers are quoted in docs/results.md), not a test's."""
     kwargs: dict = dict(
         n_critics=3,
         top_k=2,

@@ -38,19 +38,15 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from helpers import light_kwargs
+
 # the checkout this file belongs to: its workers import that package (as ``python -m`` from the root would)
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 
-# A configuration that trains fast on a CPU and still uses every part of POLA (dynamics model, look-ahead, EMA).
-LIGHT_CONFIG: dict[str, Any] = dict(
-    n_critics=2,
-    batch_size=64,
-    policy_kwargs=dict(net_arch=[32, 32]),
-    dynamics_kwargs=dict(n_members=2, n_elites=1, hidden_dim=32, n_layers=2),
-    dynamics_fit_kwargs=dict(max_epochs=1),
-    rollout_length=1,
-    ema_start=20,
-    ema_update_freq=2,
+# helpers.light_kwargs (the tests' one light configuration) with what the soak needs on top: an EMA that starts
+# late and skips steps, so a resume that gets its counters wrong shows
+LIGHT_CONFIG: dict[str, Any] = {key: value for key, value in light_kwargs().items() if key not in ("seed", "device")} | dict(
+    n_critics=2, batch_size=64, rollout_length=1, ema_start=20, ema_update_freq=2
 )
 
 
