@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from helpers import record_random_dataset
 
+from sb3_pola.cli import peers as peers_cli
 from sb3_pola.cli import score as score_cli
 from sb3_pola.common.datasets import load_offline_dataset
 from sb3_pola.grid import peers
@@ -387,7 +388,7 @@ def test_peers_command_runs_skips_and_refuses(
     out = tmp_path / "out"
     argv = ["--data-dir", str(root), "--datasets", "test/pendulum-v0", "--out", str(out), "--steps", "20"]
     argv += ["--eval-freq", "10", "--eval-episodes", "1", "--seeds", "0", "1", "--algos", "td3bc", "bc"]
-    assert peers.main(argv) == 0
+    assert peers_cli.main(argv) == 0
     rows = grid_rows.read_rows(out / "peers.csv")
     assert {(r["variant"], r["seed"], r["step"]) for r in rows} == {
         (v, s, t) for v in ("d3rlpy-TD3+BC", "d3rlpy-BC") for s in (0, 1) for t in (10, 20)
@@ -402,15 +403,15 @@ def test_peers_command_runs_skips_and_refuses(
     assert (out / "peers_data" / "test_pendulum-v0.npz").is_file()
     # the same command again: every cell is skipped
     capsys.readouterr()
-    assert peers.main(argv) == 0
+    assert peers_cli.main(argv) == 0
     assert capsys.readouterr().out.count("done, skipped") == 4
     assert len(grid_rows.read_rows(out / "peers.csv")) == 8
     # another budget in the same folder is refused
-    assert peers.main([*argv, "--steps", "30"]) == 2
+    assert peers_cli.main([*argv, "--steps", "30"]) == 2
 
 
 def test_peers_dry_run_lists_cells(capsys: pytest.CaptureFixture, tmp_path: pathlib.Path) -> None:
-    assert peers.main(["--dry-run", "--out", str(tmp_path / "o"), "--seeds", "0", "--datasets", "a/b-v0"]) == 0
+    assert peers_cli.main(["--dry-run", "--out", str(tmp_path / "o"), "--seeds", "0", "--datasets", "a/b-v0"]) == 0
     text = capsys.readouterr().out
     assert "3 d3rlpy runs" in text and "a_b-v0__d3rlpy-iql__seed0" in text
     assert not (tmp_path / "o").exists()
@@ -431,7 +432,7 @@ def test_real_d3rlpy_cell(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatc
     out = tmp_path / "out"
     argv = ["--data-dir", str(root), "--datasets", "test/hopper-v0", "--out", str(out), "--steps", "200"]
     argv += ["--eval-freq", "100", "--eval-episodes", "2", "--seeds", "0", "--algos", "td3bc", "-v", "0"]
-    assert peers.main(argv) == 0
+    assert peers_cli.main(argv) == 0
     rows = grid_rows.read_rows(out / "peers.csv")
     assert [(r["variant"], r["step"], r["eval_episodes"]) for r in rows] == [
         ("d3rlpy-TD3+BC", 100, 2),

@@ -21,8 +21,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "optimize": ("sb3_pola.zoo", "rl-zoo3 hyperparameter search with POLA's sampler"),
     "bench": ("sb3_pola.benchmarks.bench", "speed and memory benchmarks"),
     "score": ("sb3_pola.cli.score", "score benchmark: POLA and its ablations over datasets and seeds"),
-    "peers": ("sb3_pola.grid.peers", "d3rlpy baselines (TD3+BC, IQL, BC) for the score table"),
-    "model-check": ("sb3_pola.grid.model_check", "k-step error of the dynamics model under dataset and policy actions"),
+    "peers": ("sb3_pola.cli.peers", "d3rlpy baselines (TD3+BC, IQL, BC) for the score table"),
+    "model-check": ("sb3_pola.cli.model_check", "k-step error of the dynamics model under dataset and policy actions"),
     "datasets": ("sb3_pola.cli.datasets", "list the Minari datasets found locally"),
     "export": ("sb3_pola.cli.export", "export a saved model's deterministic policy to ONNX or TorchScript"),
 }

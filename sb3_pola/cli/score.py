@@ -34,17 +34,14 @@ Any preset value can be overridden from the command line.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import datetime
 import json
-import os
-import pathlib
 import sys
-from collections.abc import Iterator
 from dataclasses import asdict
 
 import torch as th
 
+from sb3_pola.cli.options import datasets_path
 from sb3_pola.common.machine import machine_info
 from sb3_pola.grid.ray_runner import run_grid
 from sb3_pola.grid.reevaluate import reevaluate
@@ -132,23 +129,8 @@ def main(argv: list[str] | None = None) -> int:
         except (ImportError, ValueError) as error:  # the URL's fsspec backend is missing, or an unknown protocol
             print(f"[score] --out {args.out}: {error}", file=sys.stderr)
             return 2
-    with open_workspace(args.out) as view, _datasets_path(args.data_dir):
+    with open_workspace(args.out) as view, datasets_path(args.data_dir):
         return _main(args, argv, view)
-
-
-@contextlib.contextmanager
-def _datasets_path(data_dir: str | None) -> Iterator[None]:
-    """``MINARI_DATASETS_PATH`` set to ``--data-dir`` while the command runs (and its Ray workers start), then restored."""
-    old = os.environ.get("MINARI_DATASETS_PATH")
-    if data_dir:
-        os.environ["MINARI_DATASETS_PATH"] = str(pathlib.Path(data_dir).resolve())
-    try:
-        yield
-    finally:
-        if old is None:
-            os.environ.pop("MINARI_DATASETS_PATH", None)
-        else:
-            os.environ["MINARI_DATASETS_PATH"] = old
 
 
 def _main(args: argparse.Namespace, argv: list[str] | None, view: Workspace) -> int:
