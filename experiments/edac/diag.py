@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import pathlib
 import statistics
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
+# the recipes' raw outputs (train/, models/): outputs/<run> unless RUNS names another folder
+RUNS = pathlib.Path(os.environ.get("RUNS", ROOT.parent / "outputs"))
 FOLDERS = {
     "grid": "score10k",
     "diversity": "edac/div1.0",
@@ -42,7 +45,7 @@ def main() -> None:
     for dataset in ("halfcheetah_medium-v0", "halfcheetah_medium-replay-v0"):
         for variant in ("T0", "T3"):
             for label, folder in FOLDERS.items():
-                cells = sorted((ROOT / folder / "train").glob(f"{dataset}__{variant}__seed*"))
+                cells = sorted((RUNS / folder / "train").glob(f"{dataset}__{variant}__seed*"))
                 if not cells:
                     continue
                 stats = [s for s in (tail_means(c) for c in cells) if not math.isnan(s["q_mean"])]  # finished cells

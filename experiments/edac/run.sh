@@ -11,4 +11,4 @@ export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 variants=${1:-T0} datasets=${2:-halfcheetah/medium-v0} seeds=${3:-0} name=${4:-div1.0} more=${5:-}
 "${PYTHON:-python}" -m sb3_pola.cli score --preset cpu --data-dir "${MINARI_DATASETS_PATH:?set it to the folder of Minari datasets}" --device cpu --threads 1 \
   --extra "{\"q_scale_floor\": \"auto\", \"lookahead_normalization\": \"weights\", \"critic_diversity\": 1.0${more:+, $more}}" \
-  --variants $variants --datasets $datasets --seeds $seeds --out "experiments/edac/$name"
+  --variants $variants --datasets $datasets --seeds $seeds --out "${OUT:-outputs/edac/$name}"

@@ -13,6 +13,8 @@ from sb3_pola.common.datasets import load_offline_dataset
 from sb3_pola.pola.pola import ensemble_similarity
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
+# the recipes' raw outputs (train/, models/): outputs/<run> unless RUNS names another folder
+RUNS = pathlib.Path(os.environ.get("RUNS", ROOT.parent / "outputs"))
 DATA = pathlib.Path(os.environ["MINARI_DATASETS_PATH"])  # the folder of Minari datasets
 
 
@@ -32,7 +34,7 @@ def main() -> None:
     for dataset in ("halfcheetah/medium-v0", "halfcheetah/medium-replay-v0"):
         name = f"{dataset.replace('/', '_')}__T3__seed0.zip"
         for label, folder in (("plain (10k grid)", "score10k"), ("critic_diversity 1", "edac/div1.0")):
-            path = ROOT / folder / "models" / name
+            path = RUNS / folder / "models" / name
             if path.exists():
                 print(f"| {dataset} | {label} | {similarity(POLA.load(path, device='cpu'), dataset):.2f} |")
 

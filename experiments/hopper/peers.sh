@@ -5,4 +5,4 @@ cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 "${PYTHON:-python}" -m sb3_pola.cli peers --data-dir "${DATA:-${MINARI_DATASETS_PATH:?set DATA or MINARI_DATASETS_PATH to the folder of Minari datasets}}" --datasets hopper/medium-v0 \
   --algos ${1:-bc td3bc iql} --seeds ${2:-0 1 2} --steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 \
-  --out experiments/hopper/floor_edac_detached
+  --out "${OUT:-outputs/hopper/floor_edac_detached}"

@@ -5,4 +5,4 @@ cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 extra=${4:-'{}'}
 "${PYTHON:-python}" -m sb3_pola.cli score --preset cpu --data-dir "${DATA:-${MINARI_DATASETS_PATH:?set DATA or MINARI_DATASETS_PATH to the folder of Minari datasets}}" --device cpu --threads 1 \
-  --extra "$extra" --variants ${1:-BC T0 T3} --datasets hopper/medium-v0 --seeds ${2:-0 1 2} --out "${3:-experiments/hopper/score}"
+  --extra "$extra" --variants ${1:-BC T0 T3} --datasets hopper/medium-v0 --seeds ${2:-0 1 2} --out "${3:-outputs/hopper/score}"

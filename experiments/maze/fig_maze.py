@@ -17,6 +17,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import pandas as pd
 
+REPO = pathlib.Path(__file__).resolve().parents[2]  # the paths below are relative to the repository
+
 PANELS = [  # dataset, folder, title, column
     ("pointmaze/umaze-v0", "experiments/maze_hint", "U-maze", "score"),
     ("pointmaze/medium-v0", "experiments/maze_medium", "medium maze", "score"),
@@ -32,10 +34,10 @@ CURVES = [  # variant, label, colour, line style
 ]
 
 
-def main(out: str = "docs/maze_curves.png") -> None:
+def main(out: str = str(REPO / "docs" / "maze_curves.png")) -> None:
     fig, axes = plt.subplots(1, len(PANELS), figsize=(14, 3.8), sharey=False)
     for ax, (dataset, folder, title, column) in zip(axes, PANELS, strict=True):
-        frames = [pd.read_csv(p) for p in (pathlib.Path(folder) / n for n in ("scores.csv", "peers.csv")) if p.is_file()]
+        frames = [pd.read_csv(p) for p in (REPO / folder / n for n in ("scores.csv", "peers.csv")) if p.is_file()]
         rows = pd.concat(frames, ignore_index=True)
         rows = rows[rows["dataset"] == dataset]
         for variant, label, colour, style in CURVES:

@@ -14,6 +14,8 @@ import pathlib
 
 import pandas as pd
 
+REPO = pathlib.Path(__file__).resolve().parents[2]  # the paths below are relative to the repository
+
 SOURCES = {  # dataset -> (folders of scores.csv / peers.csv / reeval.csv, label)
     "pointmaze/umaze-v0": (["experiments/maze_hint", "experiments/maze_detached"], "U-maze"),
     "pointmaze/medium-v0": (["experiments/maze_medium"], "medium maze"),
@@ -69,7 +71,7 @@ def main() -> None:
     print("| maze | method | normalised score (per seed) | success rate (per seed) |")
     print("|---|---|---|---|")
     for dataset, (folders, label) in SOURCES.items():
-        rows = pd.concat([final_rows(pathlib.Path(f)) for f in folders], ignore_index=True)
+        rows = pd.concat([final_rows(REPO / f) for f in folders], ignore_index=True)
         rows = rows[rows["dataset"] == dataset] if not rows.empty else rows
         for variant, name in VARIANTS.items():
             runs = rows[rows["variant"] == variant].sort_values("seed") if not rows.empty else rows

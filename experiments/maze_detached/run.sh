@@ -6,4 +6,4 @@ cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 "${PYTHON:-python}" -m sb3_pola.cli score --preset cpu --data-dir sb3_pola/data/datasets --device cpu --threads 1 \
   --extra '{"backprop_through_model": false}' --variants ${VARIANTS:-T3} --datasets pointmaze/umaze-v0 \
-  --seeds ${SEEDS:-0 1 2} --out experiments/maze_detached
+  --seeds ${SEEDS:-0 1 2} --out "${OUT:-outputs/maze_detached}"

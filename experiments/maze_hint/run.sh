@@ -5,4 +5,4 @@
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 "${PYTHON:-python}" -m sb3_pola.cli score --preset cpu --data-dir "${DATA:-sb3_pola/data/datasets}" --device cpu --threads 1 \
-  --variants BC T0 T3 --datasets pointmaze/umaze-v0 --seeds 0 --out experiments/maze_hint
+  --variants BC T0 T3 --datasets pointmaze/umaze-v0 --seeds 0 --out "${OUT:-outputs/maze_hint}"

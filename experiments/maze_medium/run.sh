@@ -6,4 +6,4 @@
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 "${PYTHON:-python}" -m sb3_pola.cli score --preset cpu --data-dir "${DATA:-${MINARI_DATASETS_PATH:?set DATA or MINARI_DATASETS_PATH to the folder of Minari datasets}}" --device cpu --threads 1 \
-  --variants ${VARIANTS:-BC T0 T1 T3} --datasets pointmaze/medium-v0 --seeds ${SEEDS:-0 1 2} --out experiments/maze_medium
+  --variants ${VARIANTS:-BC T0 T1 T3} --datasets pointmaze/medium-v0 --seeds ${SEEDS:-0 1 2} --out "${OUT:-outputs/maze_medium}"

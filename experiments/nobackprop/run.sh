@@ -6,4 +6,4 @@ cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 "${PYTHON:-python}" -m sb3_pola.cli score --preset cpu --data-dir "${MINARI_DATASETS_PATH:?set it to the folder of Minari datasets}" --device cpu --threads 1 \
   --extra '{"q_scale_floor": "auto", "lookahead_normalization": "weights", "backprop_through_model": false}' \
-  --variants T3 --datasets halfcheetah/medium-v0 --seeds 0 1 2 --out experiments/nobackprop
+  --variants T3 --datasets halfcheetah/medium-v0 --seeds 0 1 2 --out "${OUT:-outputs/nobackprop}"

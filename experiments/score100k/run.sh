@@ -5,4 +5,4 @@ cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 "${PYTHON:-python}" -m sb3_pola.cli score --preset cpu --data-dir "${MINARI_DATASETS_PATH:?set it to the folder of Minari datasets}" --device cpu --threads 1 \
   --steps 100000 --eval-freq 5000 --eval-episodes 10 --variants "$1" --datasets halfcheetah/medium-replay-v0 \
-  --seeds 0 --out experiments/score100k
+  --seeds 0 --out "${OUT:-outputs/score100k}"

@@ -10,6 +10,7 @@ components, and the critics' spread at the actor's actions relative to their spr
 """
 
 import glob
+import os
 import pathlib
 
 import numpy as np
@@ -47,7 +48,7 @@ def fmt(values: list[float], digits: int) -> str:
 
 
 def main() -> None:
-    root = pathlib.Path("experiments")
+    root = pathlib.Path(os.environ.get("RUNS", "outputs"))  # the recipes' raw outputs (train/)
     columns = ["dataset", "variant", "look-ahead states", "Q at the data", "q_3 / q_0", "action saturation"]
     print("| " + " | ".join([*columns, "critics' spread, actor / data"]) + " |")
     print("|---|---|---|---|---|---|---|")
