@@ -115,7 +115,7 @@ class Config:
         data = {k: v for k, v in asdict(self).items() if k not in ("preset", "log_interval")}
         if data["eval_rule"] == "ema":  # the rule before it was a field: folders made then keep their signature
             del data["eval_rule"]
-        # POLA's defaults where they depart from the paper's form (since 2026-12-02): a folder made under the old
+        # POLA's defaults where they depart from the paper's form (issue #12): a folder made under the old
         # defaults (the paper's form) keeps its signature, and cannot be resumed with the new ones by mistake
         changed = {key: value for key, value in pola_defaults(PAPER_FORM).items() if value != PAPER_FORM[key]}
         if changed:
