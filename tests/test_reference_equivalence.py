@@ -353,7 +353,9 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diver
         dynamics_kwargs={"n_members": 2, "n_elites": 2, "hidden_dim": 8, "n_layers": 1},
         critic_diversity=critic_diversity,
     )
-    counters.clear()  # a global count: another test's compilations must not make the first step's look like graphs
+    # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
+    th._dynamo.reset()
+    counters.clear()
     eager, compiled = _model(**kwargs), _model(compile_update=True, **kwargs)
     compiled.policy.load_state_dict(eager.policy.state_dict())
     buffer = eager._setup_offline_data()
