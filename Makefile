@@ -41,12 +41,14 @@ test-all: $(STAMP)
 	OMP_NUM_THREADS=1 $(PY) -m pytest tests -n 2 --timeout 1800 $(PYTEST_ARGS)
 
 lint: $(STAMP)
-	$(PY) -m ruff check sb3_pola tests
-	$(PY) -m ruff format --check sb3_pola tests
+	$(PY) -m ruff check sb3_pola tests experiments
+	$(PY) -m ruff format --check sb3_pola tests experiments
+	$(VENV)/bin/lint-imports
+	@for f in $$(git ls-files 'experiments/*.sh'); do bash -n "$$f" || exit 1; done
 
 format: $(STAMP)
-	$(PY) -m ruff format sb3_pola tests
-	$(PY) -m ruff check --fix sb3_pola tests
+	$(PY) -m ruff format sb3_pola tests experiments
+	$(PY) -m ruff check --fix sb3_pola tests experiments
 
 type: $(STAMP)
 	$(PY) -m mypy sb3_pola

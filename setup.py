@@ -9,6 +9,7 @@ with open(os.path.join("sb3_pola", "version.txt")) as file_handler:
 EXPORT_REQUIRES = ["onnx>=1.16", "onnxscript>=0.3", "onnxruntime>=1.18"]
 MAZE_REQUIRES = ["gymnasium-robotics>=1.4"]
 RAY_REQUIRES = ["ray>=2.10"]
+ZOO_REQUIRES = ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"]
 
 long_description = open("README.md").read() if os.path.exists("README.md") else ""
 
@@ -38,14 +39,15 @@ setup(
         "fsspec",
     ],
     extras_require={
-        "zoo": ["rl_zoo3[plots]>=2.9", "requests", "tensorboard", "optuna"],
+        "zoo": ZOO_REQUIRES,
         # Gymnasium-Robotics point mazes: sb3-pola collect --env PointMaze_...
         "maze": MAZE_REQUIRES,
         "export": EXPORT_REQUIRES,
         # sb3-pola score --ray (plain ray; "ray[default]" adds the dashboard)
         "ray": RAY_REQUIRES,
-        "tests": ["pytest", "pytest-xdist", "pytest-timeout", *MAZE_REQUIRES, *EXPORT_REQUIRES, *RAY_REQUIRES],
-        "dev": ["ruff", "mypy", "types-PyYAML", "types-requests"],
+        # the zoo extra too: without it the zoo tests would skip silently
+        "tests": ["pytest", "pytest-xdist", "pytest-timeout", *ZOO_REQUIRES, *MAZE_REQUIRES, *EXPORT_REQUIRES, *RAY_REQUIRES],
+        "dev": ["ruff", "mypy", "import-linter>=2.1", "types-PyYAML", "types-requests"],
     },
     entry_points={"console_scripts": ["sb3-pola=sb3_pola.cli:main"]},
     license="MIT",

@@ -42,7 +42,7 @@ import gymnasium as gym
 from gymnasium.envs.registration import parse_env_id
 
 from sb3_pola.common.callbacks import NormalizedScoreEvalCallback
-from sb3_pola.common.datasets import DatasetError, list_local_datasets, make_env, resolve_dataset_path
+from sb3_pola.common.datasets import D4RL_KINDS, DatasetError, list_local_datasets, make_env, resolve_dataset_path
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.pola.pola import POLA
 
@@ -60,7 +60,6 @@ FAMILY_ENVS: dict[str, str] = {
 }
 # Minari's official MuJoCo datasets (mujoco/<family>/<level>-v0) and the D4RL kinds `sb3-pola collect` makes.
 MINARI_LEVELS = ("expert", "medium", "simple")
-COLLECT_KINDS = ("random", "medium", "expert", "medium-replay", "medium-expert")
 
 # env id -> dataset id, for every env registered here
 DATASET_ENVS: dict[str, str] = {}
@@ -135,7 +134,7 @@ def register_dataset_env(dataset_id: str, env_id: str | None = None) -> str:
 def known_dataset_ids() -> list[str]:
     """Official Minari MuJoCo ids and ``sb3-pola collect`` ids (v0: small local scale, v1: the paper's scale)."""
     ids = [f"mujoco/{env}/{level}-v0" for env in ("halfcheetah", "hopper", "walker2d") for level in MINARI_LEVELS]
-    ids += [f"{env}/{kind}-v{v}" for env in ("halfcheetah", "hopper", "walker2d") for kind in COLLECT_KINDS for v in (0, 1)]
+    ids += [f"{env}/{kind}-v{v}" for env in ("halfcheetah", "hopper", "walker2d") for kind in D4RL_KINDS for v in (0, 1)]
     return ids
 
 

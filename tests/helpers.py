@@ -189,7 +189,9 @@ def record_random_dataset(
 
 
 def light_kwargs(**overrides) -> dict:
-    """A configuration small enough for unit tests on a CPU."""
+    """The tests' one light configuration: small enough for unit tests on a CPU, with every part of POLA (dynamics
+    model, look-ahead, EMA). tests/soak.py builds on it; the main job's ``LIGHT_CONFIG`` (sb3_pola/cli/run.py) is a
+    run's configuration (its numbers are quoted in docs/results.md), not a test's."""
     kwargs: dict = dict(
         n_critics=3,
         top_k=2,
@@ -218,3 +220,34 @@ def model_on_dataset(data, seed: int = 0, **kwargs):
         model.policy.dynamics.freeze()
         model.policy.dynamics_fitted.fill_(True)
     return model
+
+
+# ----------------------------------------------------------------------------- the score grid's tests
+
+# the score grid's datasets (conftest's ``score_data``): 2 random episodes of Pendulum-v1 each, truncated at 30 steps
+SCORE_DATASETS = ("test/pendulum-v0", "test/pendulum2-v0")
+# ``sb3-pola score`` options of a tiny, fast grid (the budget, datasets, variants and seeds left to each test)
+TINY_GRID = ["--batch-size", "8", "--net-arch", "8", "--n-critics", "2", "--dynamics-steps", "4"]
+TINY_GRID += ["--dynamics-kwargs", '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}']
+TINY_GRID += ["--preset", "cpu", "--no-compile", "--device", "cpu", "-v", "0"]
+
+
+def comparable(rows: list) -> list[tuple]:
+    """Score rows without their wall-clock time (str: a NaN success equals NaN)."""
+    from sb3_pola.grid.rows import CSV_FIELDS
+
+    return [tuple(str(r[k]) for k in CSV_FIELDS if k != "wall_s") for r in rows]
+
+
+def same_models(expected: pathlib.Path, models: pathlib.Path) -> None:
+    """The final models of ``models`` are those of ``expected``, bit for bit."""
+    import torch as th
+
+    from sb3_pola.pola import POLA
+
+    names = sorted(p.name for p in expected.iterdir())
+    assert sorted(p.name for p in models.iterdir()) == names
+    for name in names:
+        expected_state = POLA.load(expected / name, device="cpu").policy.state_dict()
+        state = POLA.load(models / name, device="cpu").policy.state_dict()
+        assert all(th.equal(state[key], value) for key, value in expected_state.items()), name

@@ -38,19 +38,15 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from helpers import light_kwargs
+
 # the checkout this file belongs to: its workers import that package (as ``python -m`` from the root would)
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 
-# A configuration that trains fast on a CPU and still uses every part of POLA (dynamics model, look-ahead, EMA).
-LIGHT_CONFIG: dict[str, Any] = dict(
-    n_critics=2,
-    batch_size=64,
-    policy_kwargs=dict(net_arch=[32, 32]),
-    dynamics_kwargs=dict(n_members=2, n_elites=1, hidden_dim=32, n_layers=2),
-    dynamics_fit_kwargs=dict(max_epochs=1),
-    rollout_length=1,
-    ema_start=20,
-    ema_update_freq=2,
+# helpers.light_kwargs (the tests' one light configuration) with what the soak needs on top: an EMA that starts
+# late and skips steps, so a resume that gets its counters wrong shows
+LIGHT_CONFIG: dict[str, Any] = {key: value for key, value in light_kwargs().items() if key not in ("seed", "device")} | dict(
+    n_critics=2, batch_size=64, rollout_length=1, ema_start=20, ema_update_freq=2
 )
 
 
@@ -106,6 +102,21 @@ def slow_down_checkpoint_writes(stage: str, delay: float, marker: pathlib.Path) 
     return undo
 
 
+def pause_at(step: int, marker: pathlib.Path, delay: float = 600.0) -> Any:
+    """A callback that, once training reaches gradient step ``step`` (its checkpoint, if any, written first), writes
+    ``marker`` and sleeps ``delay`` seconds: the parent kills the process there, at a step it chose."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class PauseAt(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps == step:
+                marker.write_text(str(step))
+                time.sleep(delay)
+            return True
+
+    return PauseAt()
+
+
 def run_worker(args: argparse.Namespace) -> int:
     """Train to ``--total`` steps, resuming from ``--dir`` if a checkpoint is there; save ``--final`` at the end."""
     import torch as th
@@ -124,6 +135,7 @@ def run_worker(args: argparse.Namespace) -> int:
         save_path=args.dir,
         save_freq=args.save_freq,
         load_kwargs=dict(dataset=args.dataset, device="cpu"),
+        callback=pause_at(args.pause_at, pathlib.Path(args.pause_marker)) if args.pause_at is not None else None,
         log_interval=0,
     )
     if undo is not None:
@@ -199,7 +211,7 @@ def source_fingerprint() -> str:
 
 def checkpoint_step(path: pathlib.Path) -> int | None:
     """The step of a valid checkpoint, ``None`` if there is none; raises if the file is broken."""
-    from sb3_pola.common.errors import validate_model_file
+    from sb3_pola.common.integrity import validate_model_file
 
     if not path.is_file():
         return None
@@ -477,6 +489,8 @@ def main(argv: list[str] | None = None) -> int:
     worker.add_argument("--write-delay", type=float, default=0.0, help="sleep inside every checkpoint write (tests)")
     worker.add_argument("--write-marker", default=None)
     worker.add_argument("--write-stage", choices=["before_replace", "mid_zip"], default="before_replace")
+    worker.add_argument("--pause-at", type=int, default=None, help="sleep at this gradient step, to be killed (tests)")
+    worker.add_argument("--pause-marker", default=None, help="file written when the pause starts")
     soak = sub.add_parser("soak", help="kill and resume in a loop, compare with an uninterrupted run")
     soak.add_argument("--minutes", type=float, default=60.0)
     soak.add_argument("--total", type=int, default=5000)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import pathlib
-import random
 import re
 import signal
 import subprocess
@@ -29,7 +28,7 @@ from sb3_pola.common.checkpoint import (
     save_module_state,
 )
 from sb3_pola.common.datasets import OfflineDataset
-from sb3_pola.common.errors import DivergenceError, ModelFileError, validate_model_file
+from sb3_pola.common.integrity import DivergenceError, ModelFileError, validate_model_file
 from sb3_pola.pola.pola import POLA
 
 make_model = make_light_model  # POLA, light config, CPU, decaying learning rate: what the soak workers train
@@ -119,8 +118,19 @@ def _wait_for(condition, process: subprocess.Popen, timeout: float = 120.0) -> N
         time.sleep(0.02)
 
 
+def _kill_at_step(command: list[str], step: int, marker: pathlib.Path, env: dict[str, str]) -> None:
+    """Run a worker that pauses at gradient ``step`` (after that step's checkpoint, if any) and SIGKILL it there."""
+    process = subprocess.Popen([*command, "--pause-at", str(step), "--pause-marker", str(marker)], env=env)
+    _wait_for(marker.exists, process)
+    assert process.poll() is None
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    marker.unlink()
+
+
 def test_sigkill_during_training_and_during_checkpoint_write(tiny_dataset: str, tmp_path: pathlib.Path) -> None:
-    """Real processes killed with SIGKILL at a random moment and inside a checkpoint write, then resumed."""
+    """Real processes killed with SIGKILL at chosen steps (between checkpoints, after the last one) and inside a
+    checkpoint write, then resumed to the parameters of the uninterrupted run."""
     total, save_freq = 100, 20
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     # the uninterrupted run, in this process with the worker's settings (one thread, as the workers)
@@ -140,14 +150,11 @@ def test_sigkill_during_training_and_during_checkpoint_write(tiny_dataset: str, 
     final = tmp_path / "final.zip"
     command = worker_command(tiny_dataset, run_dir, total, save_freq, final=final)
 
-    # 1. kill at a random moment after the first checkpoint
-    process = subprocess.Popen(command, env=env)
-    _wait_for(latest.is_file, process)
-    time.sleep(random.Random(os.getpid()).uniform(0.0, 0.5))
-    process.send_signal(signal.SIGKILL)
-    process.wait()
+    # 1. kill between two checkpoints: at step 50, the last checkpoint is step 40's
+    pause_marker = tmp_path / "paused"
+    _kill_at_step(command, 50, pause_marker, env)
     step_1 = validate_model_file(latest)["num_timesteps"]
-    assert step_1 % save_freq == 0 or step_1 in (1, total)
+    assert step_1 == 40
 
     # 2. kill inside checkpoint writes: while SB3 writes the zip (the temp file is a truncated zip), and
     # after the temp file is complete but before the rename
@@ -169,7 +176,12 @@ def test_sigkill_during_training_and_during_checkpoint_write(tiny_dataset: str, 
         assert validate_model_file(latest)["num_timesteps"] >= step  # the latest file is intact
         step = validate_model_file(latest)["num_timesteps"]
 
-    # 3. resume to the end
+    # 3. kill after the last checkpoint (the final step's), before the run's end
+    _kill_at_step(command, total, pause_marker, env)
+    assert validate_model_file(latest)["num_timesteps"] == total
+    assert not final.exists()
+
+    # 4. resume to the end
     subprocess.run(command, env=env, check=True)
     assert not list(run_dir.glob(".*.tmp.zip"))  # stale temp files are cleaned up
     assert compare_checkpoints(reference, final) == []

@@ -13,11 +13,13 @@ import zipfile
 
 import pytest
 
+import sb3_pola
 from sb3_pola import cli
+from sb3_pola.common import extras as extras_table
 from sb3_pola.pola.pola import POLA
 
 REPO = pathlib.Path(__file__).resolve().parent.parent
-ALL_EXTRA_MODULES = sorted(set().union(*cli.EXTRA_MODULES.values()))
+ALL_EXTRA_MODULES = sorted(set().union(*extras_table.EXTRA_MODULES.values()))
 
 
 def run_cli(argv: list[str]) -> int:
@@ -48,13 +50,13 @@ def test_extras_are_setup_pys() -> None:
     tree = ast.parse((REPO / "setup.py").read_text())
     call = next(node for node in ast.walk(tree) if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "setup")
     keywords = {keyword.arg: keyword.value for keyword in call.keywords}
-    assert ast.literal_eval(keywords["name"]) == cli.DISTRIBUTION
+    assert ast.literal_eval(keywords["name"]) == extras_table.DISTRIBUTION
     extras = keywords["extras_require"]
     assert isinstance(extras, ast.Dict)
     names = {ast.literal_eval(key) for key in extras.keys if key is not None}
-    assert set(cli.EXTRA_MODULES) <= names
-    assert {extra for extras_ in cli.COMMAND_EXTRAS.values() for extra in extras_} <= set(cli.EXTRA_MODULES)
-    assert set(cli.COMMAND_EXTRAS) <= set(cli.COMMANDS)
+    assert set(extras_table.EXTRA_MODULES) <= names
+    assert {extra for extras_ in extras_table.COMMAND_EXTRAS.values() for extra in extras_} <= set(extras_table.EXTRA_MODULES)
+    assert set(extras_table.COMMAND_EXTRAS) <= set(cli.COMMANDS)
 
 
 def test_missing_extra_follows_the_chain_of_causes() -> None:
@@ -213,7 +215,7 @@ def test_default_config_is_package_data() -> None:
     from sb3_pola import zoo
 
     config = zoo.default_config()
-    package = pathlib.Path(cli.__file__).resolve().parent
+    package = pathlib.Path(sb3_pola.__file__).resolve().parent
     assert config.is_file() and config.resolve().parent.parent == package
     assert config.relative_to(package).as_posix() == "hyperparams/pola.yml"
     args = zoo.zoo_arguments("train", ["--env", "a/b-v0"])

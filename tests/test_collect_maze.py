@@ -9,9 +9,10 @@ import minari
 import numpy as np
 import pytest
 
-from sb3_pola import cli, collect, collect_maze
-from sb3_pola.collect import run_episodes
-from sb3_pola.collect_maze import (
+from sb3_pola import cli, collect
+from sb3_pola.collect import maze as collect_maze
+from sb3_pola.collect.episodes import run_episodes
+from sb3_pola.collect.maze import (
     cell_distances,
     data_env_spec,
     eval_env_spec,

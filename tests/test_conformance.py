@@ -32,8 +32,16 @@ def check_conformance(dataset: str, tmp_path: pathlib.Path, **config) -> None:
     assert np.all(action >= act_space.low) and np.all(action <= act_space.high)
     actions, _ = model.predict(batch, deterministic=True)
     assert actions.shape == (5, *act_space.shape)
+    model.set_random_seed(3)
     stochastic, _ = model.predict(batch, deterministic=False)
     assert stochastic.shape == actions.shape
+    assert np.all(stochastic >= act_space.low) and np.all(stochastic <= act_space.high)
+    model.set_random_seed(3)  # a seeded draw repeats
+    np.testing.assert_array_equal(model.predict(batch, deterministic=False)[0], stochastic)
+    # the next draw, and the noise-free chain, differ (where the untrained actor is not saturated at the bounds)
+    if not np.isin(stochastic, np.stack([act_space.low, act_space.high])).all():
+        assert not np.array_equal(model.predict(batch, deterministic=False)[0], stochastic)
+        assert not np.array_equal(stochastic, actions)
     np.testing.assert_array_equal(model.predict(batch, deterministic=True)[0], actions)
 
     # save / load without env or dataset: identical deterministic actions

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 from helpers import ACT_HIGH, ACT_LOW, EPISODES, OBS_DIM, make_episodes, write_minari_dataset
 
+from sb3_pola.cli import datasets as datasets_cli
 from sb3_pola.common import datasets as ds
-from sb3_pola.common import scores
+from sb3_pola.common import metrics
 from sb3_pola.common.datasets import (
     DatasetError,
     DatasetNotFoundError,
@@ -111,7 +112,7 @@ def test_normalized_score(tiny_dataset, tiny_datasets_root, make_dataset):
     assert data.ref_min_score == -10.0 and data.ref_max_score == 10.0
     assert data.normalized_score([0.0, 10.0]) == pytest.approx(75.0)
     assert normalized_score(10.0, -10.0, 10.0) == pytest.approx(100.0)
-    scores._warned_no_ref.clear()
+    metrics._warned_no_ref.clear()
     bare = load_offline_dataset(make_dataset("test/noref-v0", ref_scores=False))
     assert bare.ref_min_score is None
     with pytest.warns(UserWarning, match="no ref"):
@@ -124,20 +125,20 @@ def test_normalized_score(tiny_dataset, tiny_datasets_root, make_dataset):
 
 
 def test_one_normalized_score() -> None:
-    """Dataset, model, callbacks and the peers worker score through ``sb3_pola.common.scores``."""
+    """Dataset, model, callbacks and the peers worker score through ``sb3_pola.common.metrics``."""
     import inspect
 
     from sb3_pola.common import callbacks, offline_algorithm
-    from sb3_pola.experiments import peers_worker
+    from sb3_pola.grid import peers_worker
 
-    assert ds.normalized_score is scores.normalized_score
-    assert callbacks.normalized_score is offline_algorithm.normalized_score is scores.normalized_score
-    assert inspect.getsourcefile(peers_worker.normalized_scores) == inspect.getsourcefile(scores.normalized_scores)
+    assert ds.normalized_score is metrics.normalized_score
+    assert callbacks.normalized_score is offline_algorithm.normalized_score is metrics.normalized_score
+    assert inspect.getsourcefile(peers_worker.normalized_scores) == inspect.getsourcefile(metrics.normalized_scores)
     returns = np.array([-10.0, 0.0, 5.0])
-    np.testing.assert_array_equal(scores.normalized_scores(returns, -10.0, 10.0), [0.0, 50.0, 75.0])
-    assert scores.normalized_score(returns, -10.0, 10.0) == pytest.approx(np.mean([0.0, 50.0, 75.0]))
-    assert np.isnan(scores.normalized_scores(returns, 1.0, 1.0)).all()
-    nan_score = scores.normalized_score(float("nan"), 0.0, 1.0)  # a NaN return scores NaN: not "no reference scores"
+    np.testing.assert_array_equal(metrics.normalized_scores(returns, -10.0, 10.0), [0.0, 50.0, 75.0])
+    assert metrics.normalized_score(returns, -10.0, 10.0) == pytest.approx(np.mean([0.0, 50.0, 75.0]))
+    assert np.isnan(metrics.normalized_scores(returns, 1.0, 1.0)).all()
+    nan_score = metrics.normalized_score(float("nan"), 0.0, 1.0)  # a NaN return scores NaN: not "no reference scores"
     assert nan_score is not None and np.isnan(nan_score)
 
 
@@ -275,7 +276,7 @@ def test_empty_dataset_rejected(make_dataset):
 
 
 def test_datasets_cli(tiny_dataset, capsys):
-    assert ds.main([]) == 0
+    assert datasets_cli.main([]) == 0
     out = capsys.readouterr().out
     assert tiny_dataset in out and str(N_STEPS) in out and "-10.0" in out
 

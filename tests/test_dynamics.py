@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import math
+import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -111,10 +112,13 @@ def test_fit_beats_no_change_baseline(nonlinear: bool) -> None:
     data = _synthetic(2000, nonlinear)
     th.manual_seed(0)
     model = _small()
+    start = time.perf_counter()
     metrics = fit(model, data["obs"], data["act"], data["next_obs"], data["rew"], max_epochs=40, learning_rate=1e-2)
+    elapsed = time.perf_counter() - start
     assert metrics["holdout_mse"] < 0.2 * metrics["no_change_mse"], metrics
     assert metrics["holdout_reward_mse"] < 0.2 * float(data["rew"].var()), metrics
-    assert metrics["epochs"] <= 40 and metrics["steps"] > 0 and metrics["fit_time"] > 0
+    assert 1 <= metrics["epochs"] <= 40 and metrics["steps"] >= metrics["epochs"]
+    assert 0 < metrics["fit_time"] <= elapsed  # the fit's own clock, inside the call
     assert model.elites.dtype == th.long and model.elites.shape == (3,)
     assert len(set(model.elites.tolist())) == 3
     # the normalisation statistics come from the data
@@ -192,21 +196,26 @@ def test_early_stopping_and_epoch_cap() -> None:
         model, data["obs"], data["act"], data["next_obs"], data["rew"], batch_size=64, max_epochs=3, max_epoch_steps=5
     )
     assert metrics["steps"] == 15 and metrics["epochs"] == 3
-    # patience=1 stops at the first epoch without a >1% improvement of any member
-    th.manual_seed(0)
-    model = _small()
-    metrics = fit(
-        model,
-        data["obs"],
-        data["act"],
-        data["next_obs"],
-        data["rew"],
-        patience=1,
-        max_epochs=300,
-        max_epoch_steps=2,
-        learning_rate=1e-2,
-    )
-    assert metrics["epochs"] < 300
+    # patience=1 stops at the first epoch without a >1% improvement of any member: before a longer patience does,
+    # on the same seed, and far before the cap; every epoch is max_epoch_steps steps
+    epochs = {}
+    for patience in (1, 5):
+        th.manual_seed(0)
+        model = _small()
+        metrics = fit(
+            model,
+            data["obs"],
+            data["act"],
+            data["next_obs"],
+            data["rew"],
+            patience=patience,
+            max_epochs=300,
+            max_epoch_steps=2,
+            learning_rate=1e-2,
+        )
+        assert metrics["steps"] == 2 * metrics["epochs"]
+        epochs[patience] = metrics["epochs"]
+    assert 1 < epochs[1] < epochs[5] < 300, epochs
 
 
 def test_step_differentiable_after_freeze() -> None:

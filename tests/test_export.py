@@ -17,7 +17,7 @@ from sb3_pola import POLA
 from sb3_pola.benchmarks import export_bench
 from sb3_pola.benchmarks.bench import format_tables
 from sb3_pola.cli import main as cli_main
-from sb3_pola.experiments.run import LIGHT_CONFIG, PAPER_CONFIG
+from sb3_pola.cli.run import LIGHT_CONFIG, PAPER_CONFIG
 from sb3_pola.pola.export import DeterministicPolicyGraph, PolicyExportError, export_policy
 from sb3_pola.pola.policies import POLAPolicy
 

@@ -308,7 +308,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
 
 def test_main_job_keeps_the_papers_form():
     """The shipped InvertedPendulum main job needs the paper's strong, early Q term (docs/results.md)."""
-    from sb3_pola.experiments.run import CONFIGS
+    from sb3_pola.cli.run import CONFIGS
 
     for config in CONFIGS.values():
         assert {key: config[key] for key in PAPER_FORM} == PAPER_FORM

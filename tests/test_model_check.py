@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from sb3_pola import POLA
+from sb3_pola.cli import model_check as model_check_cli
 from sb3_pola.common.datasets import load_offline_dataset
-from sb3_pola.experiments import model_check
+from sb3_pola.grid import model_check
 
 
 def test_chained_starts_stay_in_one_episode():
@@ -35,7 +36,7 @@ def test_model_check_end_to_end(tmp_path):
     out = tmp_path / "check.json"
     argv = ["--dataset", "invertedpendulum/medium-v0", "--mean-loss", "nll", "mse", "--max-steps", "60", "--starts", "20"]
     argv += ["--horizon", "2", "--policy", str(tmp_path / "policy.zip"), "--out", str(out)]
-    assert model_check.main(argv) == 0
+    assert model_check_cli.main(argv) == 0
     results = json.loads(out.read_text())
     assert set(results["fits"]) == {"nll", "mse"}
     for entry in results["fits"].values():

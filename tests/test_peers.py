@@ -11,15 +11,21 @@ import csv
 import json
 import math
 import pathlib
+import subprocess
 import sys
 
 import numpy as np
 import pytest
 from helpers import record_random_dataset
 
+from sb3_pola.cli import peers as peers_cli
+from sb3_pola.cli import score as score_cli
 from sb3_pola.common.datasets import load_offline_dataset
-from sb3_pola.experiments import peers, score
-from sb3_pola.experiments import peers_worker as worker
+from sb3_pola.grid import peers
+from sb3_pola.grid import peers_worker as worker
+from sb3_pola.grid import report as grid_report
+from sb3_pola.grid import rows as grid_rows
+from sb3_pola.grid import variants as grid_variants
 
 REPO = pathlib.Path(__file__).resolve().parent.parent
 
@@ -185,7 +191,19 @@ def test_worker_imports_only_its_venv_libraries() -> None:
             modules.add(node.module.split(".")[0])
     third_party = modules - set(sys.stdlib_module_names)
     assert third_party <= {"numpy", "gymnasium", "gymnasium_robotics", "d3rlpy", "torch", "mujoco"}, third_party
-    assert worker.CSV_FIELDS == score.CSV_FIELDS
+    assert worker.CSV_FIELDS == grid_rows.CSV_FIELDS
+
+
+def test_peers_worker_loads_without_sb3_pola() -> None:
+    """The d3rlpy venv has no ``sb3_pola``: the worker (and the normalised score it loads by path) must not need it."""
+    code = f"""
+import runpy, sys
+sys.modules["sb3_pola"] = None  # any import of the package fails
+namespace = runpy.run_path({str(pathlib.Path(worker.__file__).resolve())!r}, run_name="peers_worker")
+print(namespace["normalized_scores"]([0.0, 15.0], 0.0, 30.0).tolist())
+"""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert result.stdout.strip() == "[0.0, 50.0]"
 
 
 def test_worker_hyperparameters() -> None:
@@ -247,7 +265,7 @@ def test_worker_drop_rows(tmp_path: pathlib.Path) -> None:
         row = dict(dataset="d", variant="d3rlpy-BC", seed=seed, step=step, score=1.0, score_std=0.0, mean_return=0.0)
         worker.append_row(path, {**row, "eval_episodes": 1, "wall_s": 1.0})
     assert worker.drop_rows(path, "d", "d3rlpy-BC", 0, after_step=100) == 2
-    assert [(r["seed"], r["step"]) for r in score.read_rows(path)] == [(0, 100), (1, 100)]
+    assert [(r["seed"], r["step"]) for r in grid_rows.read_rows(path)] == [(0, 100), (1, 100)]
     assert worker.drop_rows(path, "d", "d3rlpy-BC", 0) == 1
 
 
@@ -270,7 +288,7 @@ def test_worker_upgrades_a_csv_from_before_the_success_column(tmp_path: pathlib.
             success=0.5,
         ),
     )
-    rows = score.read_rows(path)
+    rows = grid_rows.read_rows(path)
     assert [(r["step"], r["score"]) for r in rows] == [(100, 1.0), (200, 2.0)]
     assert math.isnan(rows[0]["success"]) and rows[1]["success"] == 0.5
 
@@ -299,14 +317,14 @@ def _rows(variant: str, base: float, seeds: tuple[int, ...], dataset: str = "hal
 def test_table_merges_peers(tmp_path: pathlib.Path) -> None:
     out = tmp_path / "r"
     out.mkdir()
-    score.write_rows(out / "scores.csv", _rows("T0", 10.0, (0, 1)) + _rows("T3", 20.0, (0, 1)) + _rows("BC", 8.0, (0, 1)))
+    grid_rows.write_rows(out / "scores.csv", _rows("T0", 10.0, (0, 1)) + _rows("T3", 20.0, (0, 1)) + _rows("BC", 8.0, (0, 1)))
     peer_rows = _rows("d3rlpy-BC", 5.0, (0, 1, 2)) + _rows("d3rlpy-TD3+BC", 30.0, (0, 1, 2))
     peer_rows += _rows("d3rlpy-IQL", 40.0, (0,), dataset="halfcheetah/medium-replay-v0")
-    score.write_rows(out / "peers.csv", peer_rows)
+    grid_rows.write_rows(out / "peers.csv", peer_rows)
     (out / "peers_config.json").write_text(
         json.dumps({"steps": 200, "eval_freq": 100, "eval_episodes": 2, "versions": {"d3rlpy": "2.8.1"}})
     )
-    assert score.main(["--report-only", "--out", str(out), "--variants", "T0", "T3", "BC"]) == 0
+    assert score_cli.main(["--report-only", "--out", str(out), "--variants", "T0", "T3", "BC"]) == 0
     table = (out / "table.md").read_text()
     # TD3+BC final = 34, 36, 38 -> 36.0 ± 2.0; POLA rows first, then the baselines in a fixed order
     assert "| halfcheetah/medium-v0 | d3rlpy-TD3+BC | 36.0 ± 2.0 | 36.0 ± 2.0 | 0,1,2 | 200 |" in table
@@ -321,8 +339,8 @@ def test_table_merges_peers(tmp_path: pathlib.Path) -> None:
 def test_table_of_peers_alone(tmp_path: pathlib.Path) -> None:
     out = tmp_path / "p"
     out.mkdir()
-    score.write_rows(out / "peers.csv", _rows("d3rlpy-TD3+BC", 30.0, (0, 1)))
-    score.write_reports(out, score.DEFAULT_VARIANTS)
+    grid_rows.write_rows(out / "peers.csv", _rows("d3rlpy-TD3+BC", 30.0, (0, 1)))
+    grid_report.write_reports(out, grid_variants.DEFAULT_VARIANTS)
     table = (out / "table.md").read_text()
     assert "| halfcheetah/medium-v0 | d3rlpy-TD3+BC | 35.0 ± 1.4 |" in table and "Rows `d3rlpy-*`" in table
 
@@ -370,8 +388,8 @@ def test_peers_command_runs_skips_and_refuses(
     out = tmp_path / "out"
     argv = ["--data-dir", str(root), "--datasets", "test/pendulum-v0", "--out", str(out), "--steps", "20"]
     argv += ["--eval-freq", "10", "--eval-episodes", "1", "--seeds", "0", "1", "--algos", "td3bc", "bc"]
-    assert peers.main(argv) == 0
-    rows = score.read_rows(out / "peers.csv")
+    assert peers_cli.main(argv) == 0
+    rows = grid_rows.read_rows(out / "peers.csv")
     assert {(r["variant"], r["seed"], r["step"]) for r in rows} == {
         (v, s, t) for v in ("d3rlpy-TD3+BC", "d3rlpy-BC") for s in (0, 1) for t in (10, 20)
     }
@@ -385,15 +403,15 @@ def test_peers_command_runs_skips_and_refuses(
     assert (out / "peers_data" / "test_pendulum-v0.npz").is_file()
     # the same command again: every cell is skipped
     capsys.readouterr()
-    assert peers.main(argv) == 0
+    assert peers_cli.main(argv) == 0
     assert capsys.readouterr().out.count("done, skipped") == 4
-    assert len(score.read_rows(out / "peers.csv")) == 8
+    assert len(grid_rows.read_rows(out / "peers.csv")) == 8
     # another budget in the same folder is refused
-    assert peers.main([*argv, "--steps", "30"]) == 2
+    assert peers_cli.main([*argv, "--steps", "30"]) == 2
 
 
 def test_peers_dry_run_lists_cells(capsys: pytest.CaptureFixture, tmp_path: pathlib.Path) -> None:
-    assert peers.main(["--dry-run", "--out", str(tmp_path / "o"), "--seeds", "0", "--datasets", "a/b-v0"]) == 0
+    assert peers_cli.main(["--dry-run", "--out", str(tmp_path / "o"), "--seeds", "0", "--datasets", "a/b-v0"]) == 0
     text = capsys.readouterr().out
     assert "3 d3rlpy runs" in text and "a_b-v0__d3rlpy-iql__seed0" in text
     assert not (tmp_path / "o").exists()
@@ -414,8 +432,8 @@ def test_real_d3rlpy_cell(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatc
     out = tmp_path / "out"
     argv = ["--data-dir", str(root), "--datasets", "test/hopper-v0", "--out", str(out), "--steps", "200"]
     argv += ["--eval-freq", "100", "--eval-episodes", "2", "--seeds", "0", "--algos", "td3bc", "-v", "0"]
-    assert peers.main(argv) == 0
-    rows = score.read_rows(out / "peers.csv")
+    assert peers_cli.main(argv) == 0
+    rows = grid_rows.read_rows(out / "peers.csv")
     assert [(r["variant"], r["step"], r["eval_episodes"]) for r in rows] == [
         ("d3rlpy-TD3+BC", 100, 2),
         ("d3rlpy-TD3+BC", 200, 2),
@@ -429,4 +447,4 @@ def test_real_d3rlpy_cell(tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatc
     assert marker["versions"]["d3rlpy"] == "2.8.1" and marker["hyperparameters"]["alpha"] == 2.5
     assert not (out / "peers_ckpt" / "test_hopper-v0__d3rlpy-td3bc__seed0.pkl").exists()
     with (out / "peers.csv").open() as f:
-        assert next(csv.reader(f)) == score.CSV_FIELDS
+        assert next(csv.reader(f)) == grid_rows.CSV_FIELDS

@@ -117,8 +117,16 @@ def test_ema_copies_then_averages(pendulum_path):
     model.learn(5)  # step 5 < ema_start: a copy
     for p, q in zip(model.actor.parameters(), model.policy.actor_ema.parameters(), strict=True):
         assert th.equal(p, q)
-    model.learn(10, reset_num_timesteps=False)  # step 15: an average, behind the actor
+    ema_5 = [q.detach().clone() for q in model.policy.actor_ema.parameters()]
+    model.learn(5, reset_num_timesteps=False)  # step 10 >= ema_start: ema = decay ema + (1 - decay) actor
+    decay = model.ema_decay
+    for p, q, before in zip(model.actor.parameters(), model.policy.actor_ema.parameters(), ema_5, strict=True):
+        th.testing.assert_close(q, decay * before + (1 - decay) * p, rtol=1e-6, atol=1e-7)
     assert any(not th.equal(p, q) for p, q in zip(model.actor.parameters(), model.policy.actor_ema.parameters(), strict=True))
+    ema_10 = [q.detach().clone() for q in model.policy.actor_ema.parameters()]
+    model.learn(4, reset_num_timesteps=False)  # step 14: not a multiple of ema_update_freq, no update
+    for q, before in zip(model.policy.actor_ema.parameters(), ema_10, strict=True):
+        assert th.equal(q, before)
 
 
 def test_eta_zero_is_behaviour_cloning(pendulum_path):

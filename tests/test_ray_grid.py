@@ -12,17 +12,18 @@ from typing import Any
 
 import pytest
 import torch as th
-from helpers import record_random_dataset
+from helpers import SCORE_DATASETS, TINY_GRID, comparable, same_models
 
-from sb3_pola.experiments import ray_grid, score
+from sb3_pola.cli import score as score_cli
+from sb3_pola.grid import cell as grid_cell
+from sb3_pola.grid import ray_runner
+from sb3_pola.grid import rows as grid_rows
+from sb3_pola.grid import variants as grid_variants
 from sb3_pola.pola import POLA
 
-DATASETS = ["test/pendulum-v0", "test/pendulum2-v0"]
+DATASETS = list(SCORE_DATASETS)
 VARIANTS = ["T0", "T1"]
-TINY = ["--steps", "20", "--eval-freq", "10", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
-TINY += ["--n-critics", "2", "--dynamics-steps", "4"]
-TINY += ["--dynamics-kwargs", '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}']
-TINY += ["--preset", "cpu", "--no-compile", "--device", "cpu", "--threads", "1", "-v", "0"]
+TINY = ["--steps", "20", "--eval-freq", "10", "--eval-episodes", "1", *TINY_GRID, "--threads", "1"]
 TINY += ["--datasets", *DATASETS, "--variants", *VARIANTS, "--seeds", "0"]
 # JSON {cell name: {"step": N, "action": "kill" | "raise"}}: read by the Ray workers' evaluations
 FAULTS_ENV = "SB3_POLA_TEST_FAULTS"
@@ -30,11 +31,11 @@ FAULTS_ENV = "SB3_POLA_TEST_FAULTS"
 
 def install_faults() -> None:
     """Ray worker setup hook: a cell of the faults file dies (``os._exit``, once) or raises at its evaluation of a step."""
-    real_run_cell, real_evaluate = score.run_cell, score.evaluate
+    real_run_cell, real_evaluate = grid_cell.run_cell, grid_cell.evaluate
     current: dict[str, str] = {}
 
     def run_cell(dataset: str, variant: str, seed: int, *args: Any, **kwargs: Any) -> bool:
-        current["cell"] = score.cell_name(dataset, variant, seed)
+        current["cell"] = grid_rows.cell_name(dataset, variant, seed)
         return real_run_cell(dataset, variant, seed, *args, **kwargs)
 
     def evaluate(model: Any, *args: Any, **kwargs: Any) -> Any:
@@ -49,15 +50,7 @@ def install_faults() -> None:
             raise RuntimeError(f"injected failure at step {model.num_timesteps}")
         return real_evaluate(model, *args, **kwargs)
 
-    score.run_cell, score.evaluate = run_cell, evaluate
-
-
-@pytest.fixture(scope="module")
-def data_root(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
-    root = tmp_path_factory.mktemp("ray_data")
-    for seed, dataset in enumerate(DATASETS):
-        record_random_dataset(root, dataset, "Pendulum-v1", 60, seed=seed, ref_scores=(-300.0, 0.0), max_episode_steps=30)
-    return root
+    grid_cell.run_cell, grid_cell.evaluate = run_cell, evaluate
 
 
 @pytest.fixture(scope="module")
@@ -109,133 +102,120 @@ def autogroup_nice(value: int | None) -> int | None:
 
 
 @pytest.fixture(scope="module")
-def sequential(data_root: pathlib.Path, local_ray: pathlib.Path, tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
+def sequential(score_data: pathlib.Path, local_ray: pathlib.Path, tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
     """The sequential run of the grid (while the Ray workers warm up), the reference of the Ray runs."""
     out = tmp_path_factory.mktemp("sequential") / "out"
-    assert score.main([*TINY, "--data-dir", str(data_root), "--out", str(out)]) == 0
+    assert score_cli.main([*TINY, "--data-dir", str(score_data), "--out", str(out)]) == 0
     return out
-
-
-def same_models(expected: pathlib.Path, models: pathlib.Path) -> None:
-    """The final models of ``models`` are those of ``expected``, bit for bit."""
-    names = sorted(p.name for p in expected.iterdir())
-    assert sorted(p.name for p in models.iterdir()) == names
-    for name in names:
-        expected_state = POLA.load(expected / name, device="cpu").policy.state_dict()
-        state = POLA.load(models / name, device="cpu").policy.state_dict()
-        assert all(th.equal(state[key], value) for key, value in expected_state.items()), name
-
-
-def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
-    """Rows without their wall-clock time."""
-    return [tuple(str(r[k]) for k in score.CSV_FIELDS if k != "wall_s") for r in rows]  # str: NaN success equals NaN
 
 
 # about 30 s on an idle 2-core machine; with other jobs holding the cores, Ray's workers (nice 15) get little CPU
 # and it once needed more than the suite's 600 s, hence its own timeout
+@pytest.mark.slow  # Ray workers; the cell task's side: test_a_cell_task_after_its_dynamics_fit_is_the_sequential_cell
 @pytest.mark.timeout(1500)
 def test_ray_grid_equals_sequential_and_recovers(
-    data_root: pathlib.Path,
+    score_data: pathlib.Path,
     local_ray: pathlib.Path,
     sequential: pathlib.Path,
     tmp_path: pathlib.Path,
     capsys: pytest.CaptureFixture,
 ) -> None:
     distributed = tmp_path / "ray"
-    expected = score.read_rows(sequential / "scores.csv")
+    expected = grid_rows.read_rows(sequential / "scores.csv")
     assert len(expected) == 8  # 2 datasets x 2 variants x evaluations at steps 10 and 20
 
     # one worker dies after the cell's first evaluation, another cell raises: the other two cells finish
-    killed, broken = (score.cell_name(d, "T1", 0) for d in DATASETS)
+    killed, broken = (grid_rows.cell_name(d, "T1", 0) for d in DATASETS)
     local_ray.write_text(json.dumps({killed: {"step": 20, "action": "kill"}, broken: {"step": 10, "action": "raise"}}))
-    command = [*TINY, "--data-dir", str(data_root), "--out", str(distributed), "--ray", "--max-retries", "0"]
+    command = [*TINY, "--data-dir", str(score_data), "--out", str(distributed), "--ray", "--max-retries", "0"]
     capsys.readouterr()
-    assert score.main(command) == 1
+    assert score_cli.main(command) == 1
     err = capsys.readouterr().err
     assert f"{broken} failed" in err and "injected failure at step 10" in err
     assert f"{killed} failed" in err
     finished = {p.stem for p in (distributed / "cells").glob("*.json")}
-    assert finished == {score.cell_name(d, "T0", 0) for d in DATASETS}
+    assert finished == {grid_rows.cell_name(d, "T0", 0) for d in DATASETS}
     assert sorted(p.name for p in (distributed / "dynamics").iterdir()) == [
-        f"{score.slug(d)}__shared.pt" for d in DATASETS
+        f"{grid_rows.slug(d)}__shared.pt" for d in DATASETS
     ]  # fitted once per dataset
-    rows = score.read_rows(distributed / "scores.csv")
-    assert [r["step"] for r in rows if score.cell_name(r["dataset"], r["variant"], r["seed"]) == killed] == [10]
+    rows = grid_rows.read_rows(distributed / "scores.csv")
+    assert [r["step"] for r in rows if grid_rows.cell_name(r["dataset"], r["variant"], r["seed"]) == killed] == [10]
     assert (distributed / "ckpt" / f"{killed}.zip").exists()
 
     # the same command again: finished cells skipped, the killed one continues from its checkpoint
     local_ray.write_text("{}")
-    assert score.main(command) == 0
+    assert score_cli.main(command) == 0
     assert len(list((distributed / "cells").glob("*.json"))) == 4
-    assert comparable(score.read_rows(distributed / "scores.csv")) == comparable(expected)
+    assert comparable(grid_rows.read_rows(distributed / "scores.csv")) == comparable(expected)
     assert "| test/pendulum2-v0 | T1 |" in (distributed / "table.md").read_text()
     assert (distributed / "fig_rollout_test_pendulum2-v0.png").exists()
     same_models(sequential / "models", distributed / "models")
     assert not list((distributed / "ckpt").glob("*.zip"))
 
 
+@pytest.mark.slow  # Ray workers; the storage side: tests/test_storage.py
 @pytest.mark.timeout(1500)
 def test_ray_grid_into_a_url(
-    data_root: pathlib.Path, local_ray: pathlib.Path, sequential: pathlib.Path, tmp_path: pathlib.Path
+    score_data: pathlib.Path, local_ray: pathlib.Path, sequential: pathlib.Path, tmp_path: pathlib.Path
 ) -> None:
     """--out file://...: every worker in its own scratch folder; a worker killed mid-cell is retried from the storage."""
-    from sb3_pola.experiments.storage import Storage
+    from sb3_pola.grid.storage import Storage
 
     url = (tmp_path / "store").as_uri()
-    killed = score.cell_name(DATASETS[0], "T1", 0)
+    killed = grid_rows.cell_name(DATASETS[0], "T1", 0)
     local_ray.write_text(json.dumps({killed: {"step": 20, "action": "kill"}}))  # once: the retry goes through
     grid = ["--datasets", DATASETS[0], "--max-retries", "1"]
-    assert score.main([*TINY, "--data-dir", str(data_root), "--out", url, "--ray", *grid]) == 0
+    assert score_cli.main([*TINY, "--data-dir", str(score_data), "--out", url, "--ray", *grid]) == 0
     assert json.loads(local_ray.read_text()) == {}  # the worker did die (the fault is dropped just before)
     storage = Storage(url)
     local = tmp_path / "local"
     for rel in storage.list(""):
         assert storage.get(rel, local / rel)
-    expected = [r for r in score.read_rows(sequential / "scores.csv") if r["dataset"] == DATASETS[0]]
-    assert comparable(score.read_rows(local / "scores.csv")) == comparable(expected)
+    expected = [r for r in grid_rows.read_rows(sequential / "scores.csv") if r["dataset"] == DATASETS[0]]
+    assert comparable(grid_rows.read_rows(local / "scores.csv")) == comparable(expected)
     assert (local / "train" / killed / "progress_from10.csv").exists()  # the retry continued from the step-10 checkpoint
     assert not storage.list("ckpt") and len(storage.list("cells")) == 2 and (local / "table.md").exists()
     expected_models = tmp_path / "expected"
     expected_models.mkdir()
-    for path in (sequential / "models").glob(f"{score.slug(DATASETS[0])}__*.zip"):
+    for path in (sequential / "models").glob(f"{grid_rows.slug(DATASETS[0])}__*.zip"):
         (expected_models / path.name).write_bytes(path.read_bytes())
     same_models(expected_models, local / "models")
 
 
 def test_a_cell_task_after_its_dynamics_fit_is_the_sequential_cell(
-    data_root: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
+    score_data: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The workers' side without Ray: the fit stops after step 1 with a checkpoint, the cell resumes from it."""
-    monkeypatch.setenv("MINARI_DATASETS_PATH", str(data_root))
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(score_data))
     threads = th.get_num_threads()
     th.set_num_threads(1)
     try:
-        config = score.build_config(score.parse_args(TINY), "cpu")
+        config = grid_variants.build_config(score_cli.parse_args(TINY), "cpu")
         cell = (DATASETS[0], "T1", 0)
-        name = score.cell_name(*cell)
-        assert score.run_cell(*cell, config, tmp_path / "sequential", "cpu", verbose=0)
+        name = grid_rows.cell_name(*cell)
+        assert grid_cell.run_cell(*cell, config, tmp_path / "sequential", "cpu", verbose=0)
         out = tmp_path / "grid"
         common = (asdict(config), str(out), "cpu", 1, 0)
-        assert ray_grid.cell_task(cell, *common, True, {}) is False
-        assert score.dynamics_path(out, *cell[::2], config).exists() and (out / "ckpt" / f"{name}.zip").exists()
-        assert score.read_rows(ray_grid.rows_path(out, cell)) == []
-        assert ray_grid.cell_task(cell, *common, False, {}) is True
-        assert ray_grid.cell_task(cell, *common, False, {}) is True  # finished: nothing is run again
+        assert ray_runner.cell_task(cell, *common, True, {}) is False
+        assert grid_cell.dynamics_path(out, *cell[::2], config).exists() and (out / "ckpt" / f"{name}.zip").exists()
+        assert grid_rows.read_rows(grid_rows.rows_path(out, cell)) == []
+        assert ray_runner.cell_task(cell, *common, False, {}) is True
+        assert ray_runner.cell_task(cell, *common, False, {}) is True  # finished: nothing is run again
     finally:
         th.set_num_threads(threads)
-    rows = score.read_rows(ray_grid.rows_path(out, cell))
+    rows = grid_rows.read_rows(grid_rows.rows_path(out, cell))
     assert [r["step"] for r in rows] == [10, 20]
-    assert comparable(rows) == comparable(score.read_rows(tmp_path / "sequential" / "scores.csv"))
+    assert comparable(rows) == comparable(grid_rows.read_rows(tmp_path / "sequential" / "scores.csv"))
     expected = POLA.load(tmp_path / "sequential" / "models" / f"{name}.zip", device="cpu").policy.state_dict()
     state = POLA.load(out / "models" / f"{name}.zip", device="cpu").policy.state_dict()
     assert all(th.equal(state[key], value) for key, value in expected.items())
 
 
 def test_missing_ray_says_which_extra(
-    data_root: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+    score_data: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
-    assert score.main([*TINY, "--data-dir", str(data_root), "--out", str(tmp_path / "out"), "--ray"]) == 2
+    assert score_cli.main([*TINY, "--data-dir", str(score_data), "--out", str(tmp_path / "out"), "--ray"]) == 2
     err = capsys.readouterr().err
     assert 'sb3-pola score needs the "ray" extra: pip install "sb3_pola[ray]"' in err and "Traceback" not in err
     assert not (tmp_path / "out" / "scores.csv").exists()
@@ -243,16 +223,16 @@ def test_missing_ray_says_which_extra(
 
 def test_dynamics_fits_follow_the_sequential_order(tmp_path: pathlib.Path) -> None:
     cells = [(d, v, s) for s in (0, 1) for d in DATASETS for v in ("T0", "BC", "T3", "T1")]
-    config = score.build_config(score.parse_args(["--preset", "cpu"]), "cpu")
-    fits = ray_grid.plan_dynamics_fits(cells, config, tmp_path)
+    config = grid_variants.build_config(score_cli.parse_args(["--preset", "cpu"]), "cpu")
+    fits = ray_runner.plan_dynamics_fits(cells, config, tmp_path)
     assert list(fits.values()) == [(d, "T3", 0) for d in DATASETS]
     config.share_dynamics = False
-    fits = ray_grid.plan_dynamics_fits(cells, config, tmp_path)
+    fits = ray_runner.plan_dynamics_fits(cells, config, tmp_path)
     assert list(fits.values()) == [(d, "T3", s) for s in (0, 1) for d in DATASETS]
-    path = score.dynamics_path(tmp_path, DATASETS[0], 0, config)
+    path = grid_cell.dynamics_path(tmp_path, DATASETS[0], 0, config)
     path.parent.mkdir()
     path.write_bytes(b"")  # already fitted
-    assert (DATASETS[0], "T3", 0) not in ray_grid.plan_dynamics_fits(cells, config, tmp_path).values()
+    assert (DATASETS[0], "T3", 0) not in ray_runner.plan_dynamics_fits(cells, config, tmp_path).values()
 
 
 def test_rows_of_the_cells_merge_into_scores_csv(tmp_path: pathlib.Path) -> None:
@@ -261,11 +241,11 @@ def test_rows_of_the_cells_merge_into_scores_csv(tmp_path: pathlib.Path) -> None
         return dict(dataset="d", variant=variant, seed=0, step=step, score=value, **fields)
 
     # a sequential run interrupted in T1, with a finished cell of another grid (T5)
-    score.write_rows(tmp_path / "scores.csv", [row("T5", 10, 5.0), row("T1", 10, 1.0), row("T0", 10, 0.0)])
+    grid_rows.write_rows(tmp_path / "scores.csv", [row("T5", 10, 5.0), row("T1", 10, 1.0), row("T0", 10, 0.0)])
     cells = [("d", "T0", 0), ("d", "T1", 0)]
-    ray_grid.adopt_rows(tmp_path, cells[1:])
-    assert [r["score"] for r in score.read_rows(ray_grid.rows_path(tmp_path, cells[1]))] == [1.0]
-    score.append_row(ray_grid.rows_path(tmp_path, cells[1]), row("T1", 20, 2.0))
-    merged = ray_grid.collect_rows(tmp_path, cells)
+    grid_rows.adopt_rows(tmp_path, cells[1:])
+    assert [r["score"] for r in grid_rows.read_rows(grid_rows.rows_path(tmp_path, cells[1]))] == [1.0]
+    grid_rows.append_row(grid_rows.rows_path(tmp_path, cells[1]), row("T1", 20, 2.0))
+    merged = grid_rows.collect_rows(tmp_path, cells)
     assert [(r["variant"], r["step"]) for r in merged] == [("T5", 10), ("T0", 10), ("T1", 10), ("T1", 20)]
-    assert comparable(score.read_rows(tmp_path / "scores.csv")) == comparable(merged)
+    assert comparable(grid_rows.read_rows(tmp_path / "scores.csv")) == comparable(merged)

@@ -327,6 +327,7 @@ def test_compiled_mish_equals_mish():
     _close(FusedMish()(x), F.mish(x))
 
 
+@pytest.mark.slow  # torch.compile for minutes; the fallback path: test_compile_update_falls_back_to_eager
 @pytest.mark.parametrize("cudagraph_path, critic_diversity", [(False, 0.0), (True, 0.0), (False, 0.5)])
 def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diversity):
     """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
@@ -352,6 +353,9 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diver
         dynamics_kwargs={"n_members": 2, "n_elites": 2, "hidden_dim": 8, "n_layers": 1},
         critic_diversity=critic_diversity,
     )
+    # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
+    th._dynamo.reset()
+    counters.clear()
     eager, compiled = _model(**kwargs), _model(compile_update=True, **kwargs)
     compiled.policy.load_state_dict(eager.policy.state_dict())
     buffer = eager._setup_offline_data()
@@ -419,3 +423,43 @@ def test_chunked_sampling_equals_one_pass():
         with th.no_grad():
             _close(fast, actor.sample(feats, deterministic=True))
             _close(noisy, actor.sample(feats, generator=th.Generator().manual_seed(0)))
+
+
+def test_td_target_by_hand_with_diverged_targets_and_terminal_rows():
+    """The critic's target ``r + gamma (1 - done) min_j Q'_j(s', a')``, ``a'`` from the EMA actor, computed by hand.
+
+    The target critics and the EMA actor are moved away from the online networks (a fresh model has them equal, so a
+    target built from the online ones would pass), and half the rows are terminal (the synthetic data has almost none).
+    """
+    model = _model(critic_diversity=0.0)
+    policy = model.policy
+    gen = th.Generator().manual_seed(7)
+    with th.no_grad():
+        for p in (*policy.critic_target.parameters(), *policy.actor_ema.parameters()):
+            p.add_(0.3 * th.randn(p.shape, generator=gen))
+    buffer = model._setup_offline_data()
+    th.manual_seed(0)
+    batch = buffer.sample(32)
+    dones = th.zeros_like(batch.dones)
+    dones[::2] = 1.0
+    batch = batch._replace(dones=dones)
+    obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
+    rewards, done = batch.rewards.flatten().double(), dones.flatten().double()
+    feats = policy.features_extractor
+    with th.no_grad():
+        q_online = ref_q(policy.critic, obs, actions).double()  # [N, B], before the step
+        th.manual_seed(1)
+        next_actions = ref_sample(policy.actor_ema, feats(next_obs))
+        next_q = ref_q(policy.critic_target, next_obs, next_actions).double().min(dim=0).values
+        target = rewards + model.gamma * (1.0 - done) * next_q
+        # what a target from the online networks would give: far enough from the right one to be told apart
+        th.manual_seed(1)
+        wrong_q = ref_q(policy.critic, next_obs, ref_sample(policy.actor, feats(next_obs))).double().min(dim=0).values
+        wrong = rewards + model.gamma * (1.0 - done) * wrong_q
+    assert th.equal(target[::2], rewards[::2])  # terminal rows: the reward alone
+    assert (target[1::2] - wrong[1::2]).abs().mean() > 0.05
+    expected_loss = ((q_online - target) ** 2).mean(dim=1).sum()
+    th.manual_seed(1)
+    stats = model._update(batch)
+    assert stats["target_q"].item() == pytest.approx(target.mean().item(), rel=1e-5, abs=1e-5)
+    assert stats["critic_loss"].item() == pytest.approx(expected_loss.item(), rel=1e-5, abs=1e-5)

@@ -6,7 +6,7 @@ import json
 import pathlib
 
 from sb3_pola import POLA
-from sb3_pola.experiments import run
+from sb3_pola.cli import run
 
 
 def test_main_job_writes_model_curve_and_results(tmp_path: pathlib.Path) -> None:

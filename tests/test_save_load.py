@@ -9,7 +9,7 @@ import gymnasium as gym
 import pytest
 from soak import make_light_model
 
-from sb3_pola.common.errors import ModelFileError
+from sb3_pola.common.integrity import ModelFileError
 from sb3_pola.pola.pola import POLA
 
 make_model = make_light_model

@@ -4,42 +4,32 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import pathlib
 
 import numpy as np
 import pytest
-from helpers import record_random_dataset
+from helpers import TINY_GRID
 
-from sb3_pola.experiments import diagnostics, score
+from sb3_pola.cli import score as score_cli
+from sb3_pola.grid import cell as grid_cell
+from sb3_pola.grid import diagnostics
+from sb3_pola.grid import reevaluate as reeval
+from sb3_pola.grid import report as grid_report
+from sb3_pola.grid import rows as grid_rows
+from sb3_pola.grid import variants as grid_variants
 
-TINY = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
-TINY += [
-    "--n-critics",
-    "2",
-    "--dynamics-steps",
-    "4",
-    "--dynamics-kwargs",
-    '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}',
-]
-TINY += ["--preset", "cpu", "--no-compile", "--device", "cpu", "-v", "0"]
-
-
-@pytest.fixture(scope="module")
-def pendulum_root(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
-    """A Minari dataset ``test/pendulum-v0``: 2 random episodes of Pendulum-v1, truncated to 30 steps."""
-    root = tmp_path_factory.mktemp("score_data")
-    record_random_dataset(root, "test/pendulum-v0", "Pendulum-v1", 60, ref_scores=(-300.0, 0.0), max_episode_steps=30)
-    return root
+TINY = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", *TINY_GRID]
 
 
 def run(root: pathlib.Path, out: pathlib.Path, *extra: str) -> int:
-    return score.main([*TINY, "--data-dir", str(root), "--datasets", "test/pendulum-v0", "--out", str(out), *extra])
+    return score_cli.main([*TINY, "--data-dir", str(root), "--datasets", "test/pendulum-v0", "--out", str(out), *extra])
 
 
-def test_score_end_to_end_and_skip(pendulum_root: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture) -> None:
+def test_score_end_to_end_and_skip(score_data: pathlib.Path, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "out"
-    assert run(pendulum_root, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1") == 0
-    rows = score.read_rows(out / "scores.csv")
+    assert run(score_data, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1") == 0
+    rows = grid_rows.read_rows(out / "scores.csv")
     # 3 variants x 2 seeds x evaluations at steps 3 and 6
     assert len(rows) == 12
     assert {(r["variant"], r["seed"], r["step"]) for r in rows} == {
@@ -56,18 +46,26 @@ def test_score_end_to_end_and_skip(pendulum_root: pathlib.Path, tmp_path: pathli
     assert config["steps"] == 6 and config["device"] == "cpu" and config["net_arch"] == [8]
     # the same command again: every run is skipped, nothing is added
     capsys.readouterr()
-    assert run(pendulum_root, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1", "-v", "1") == 0
+    assert run(score_data, out, "--variants", "T0", "T1", "BC", "--seeds", "0", "1", "-v", "1") == 0
     assert capsys.readouterr().out.count("done, skipped") == 6
-    assert len(score.read_rows(out / "scores.csv")) == 12
+    assert len(grid_rows.read_rows(out / "scores.csv")) == 12
     # another budget in the same folder is refused
-    assert run(pendulum_root, out, "--variants", "T0", "--seeds", "0", "--steps", "9") == 2
+    assert run(score_data, out, "--variants", "T0", "--seeds", "0", "--steps", "9") == 2
+
+
+def test_data_dir_is_restored(score_data: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--data-dir`` sets MINARI_DATASETS_PATH for the command only."""
+    before = str(tmp_path / "elsewhere")
+    monkeypatch.setenv("MINARI_DATASETS_PATH", before)
+    assert run(score_data, tmp_path / "out", "--variants", "T0", "--seeds", "0", "--dry-run") == 0
+    assert os.environ["MINARI_DATASETS_PATH"] == before
 
 
 def test_score_resumes_an_interrupted_run(
-    pendulum_root: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
+    score_data: pathlib.Path, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     out = tmp_path / "out"
-    real_evaluate = score.evaluate
+    real_evaluate = grid_cell.evaluate
     calls = []
 
     def interrupted(*args, **kwargs):  # the second evaluation never happens: the process "dies" at step 6
@@ -76,14 +74,14 @@ def test_score_resumes_an_interrupted_run(
             raise KeyboardInterrupt
         return real_evaluate(*args, **kwargs)
 
-    monkeypatch.setattr(score, "evaluate", interrupted)
+    monkeypatch.setattr(grid_cell, "evaluate", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        run(pendulum_root, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9")
-    assert [r["step"] for r in score.read_rows(out / "scores.csv")] == [3]
+        run(score_data, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9")
+    assert [r["step"] for r in grid_rows.read_rows(out / "scores.csv")] == [3]
     assert (out / "ckpt" / "test_pendulum-v0__T3-noproducts__seed0.zip").exists()
-    monkeypatch.setattr(score, "evaluate", real_evaluate)
-    assert run(pendulum_root, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9") == 0
-    rows = score.read_rows(out / "scores.csv")
+    monkeypatch.setattr(grid_cell, "evaluate", real_evaluate)
+    assert run(score_data, out, "--variants", "T3-noproducts", "--seeds", "0", "--steps", "9") == 0
+    rows = grid_rows.read_rows(out / "scores.csv")
     assert [r["step"] for r in rows] == [3, 6, 9]
     assert rows[2]["wall_s"] >= rows[0]["wall_s"]
     marker = json.loads((out / "cells" / "test_pendulum-v0__T3-noproducts__seed0.json").read_text())
@@ -111,9 +109,11 @@ def test_report_from_csv(tmp_path: pathlib.Path) -> None:
                 )
     out = tmp_path / "r"
     out.mkdir()
-    score.write_rows(out / "scores.csv", rows)
+    grid_rows.write_rows(out / "scores.csv", rows)
     assert (
-        score.main(["--report-only", "--out", str(out), "--variants", "T0", "T3", "T3-noproducts", "T3-criticproducts", "BC"])
+        score_cli.main(
+            ["--report-only", "--out", str(out), "--variants", "T0", "T3", "T3-noproducts", "T3-criticproducts", "BC"]
+        )
         == 0
     )
     table = (out / "table.md").read_text()
@@ -137,25 +137,25 @@ def test_report_from_csv(tmp_path: pathlib.Path) -> None:
     ],
 )
 def test_paper_task(dataset: str, task: tuple[str, str] | None) -> None:
-    assert score.paper_task(dataset) == task
+    assert grid_variants.paper_task(dataset) == task
 
 
 def test_presets_and_overrides() -> None:
-    args = score.parse_args(["--steps", "50", "--n-critics", "1", "--net-arch", "32", "32"])
-    cpu = score.build_config(args, "cpu")
+    args = score_cli.parse_args(["--steps", "50", "--n-critics", "1", "--net-arch", "32", "32"])
+    cpu = grid_variants.build_config(args, "cpu")
     assert (cpu.preset, cpu.steps, cpu.n_critics, cpu.top_k, cpu.net_arch) == ("cpu", 50, 1, 1, [32, 32])
-    assert cpu.eval_freq == score.PRESETS["cpu"].eval_freq
-    paper = score.build_config(score.parse_args([]), "cuda")
+    assert cpu.eval_freq == grid_variants.PRESETS["cpu"].eval_freq
+    paper = grid_variants.build_config(score_cli.parse_args([]), "cuda")
     assert (paper.preset, paper.n_critics, paper.net_arch, paper.batch_size) == ("paper", 10, [256, 256, 256], 256)
-    assert cpu.signature() != score.build_config(score.parse_args(["--steps", "51"]), "cpu").signature()
+    assert cpu.signature() != grid_variants.build_config(score_cli.parse_args(["--steps", "51"]), "cpu").signature()
     with pytest.raises(SystemExit):
-        score.parse_args(["--variants", "T7"])
+        score_cli.parse_args(["--variants", "T7"])
 
 
-def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.Path, tmp_path: pathlib.Path) -> None:
+def test_cells_keep_statistics_and_models_and_reevaluate(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
     """Every cell writes its training statistics and keeps its final model; --reevaluate scores it under other rules."""
     out = tmp_path / "out"
-    assert run(pendulum_root, out, "--variants", "T1", "--seeds", "0", "--log-interval", "2") == 0
+    assert run(score_data, out, "--variants", "T1", "--seeds", "0", "--log-interval", "2") == 0
     name = "test_pendulum-v0__T1__seed0"
     train_rows = diagnostics.read_train_stats(out / "train" / name)
     assert [r["time/total_timesteps"] for r in train_rows] == [2, 4, 6]
@@ -163,18 +163,18 @@ def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.
         assert all(key in r for r in train_rows), key
     assert all(0 <= r["train/action_saturation"] <= 1 for r in train_rows)
     assert (out / "models" / f"{name}.zip").exists()
-    final = score.read_rows(out / "scores.csv")[-1]
+    final = grid_rows.read_rows(out / "scores.csv")[-1]
     rules = ["ema", "online", "candidates3", "stochastic"]
-    assert score.main(["--out", str(out), "--reevaluate", *rules, "-v", "0"]) == 0
-    rows = {r["rule"]: r for r in score.reevaluate(out, ["ema"], 1, "cpu", verbose=0)}  # already done: skipped, read back
+    assert score_cli.main(["--out", str(out), "--reevaluate", *rules, "-v", "0"]) == 0
+    rows = {r["rule"]: r for r in reeval.reevaluate(out, ["ema"], 1, "cpu", verbose=0)}  # already done: skipped, read back
     assert set(rows) == set(rules)
     assert float(rows["ema"]["score"]) == pytest.approx(final["score"])  # same rule, same resets: the run's final score
     assert "| test/pendulum-v0 | T1 | candidates3 |" in (out / "reeval.md").read_text()
     (out / "reeval.csv").unlink()
-    again = score.reevaluate(out, ["stochastic"], 1, "cpu", verbose=0)
+    again = reeval.reevaluate(out, ["stochastic"], 1, "cpu", verbose=0)
     assert float(again[-1]["mean_return"]) == pytest.approx(float(rows["stochastic"]["mean_return"]))  # seeded sampling
     with pytest.raises(ValueError, match="unknown evaluation rule"):
-        score.main(["--out", str(out), "--reevaluate", "best-of-3"])
+        score_cli.main(["--out", str(out), "--reevaluate", "best-of-3"])
     # diagnostics.md: the end-of-training statistics of the cell, with the look-ahead growth q_1 / q_0
     table = (out / "diagnostics.md").read_text()
     row = next(line for line in table.splitlines() if line.startswith(f"| {name} |"))
@@ -185,25 +185,25 @@ def test_cells_keep_statistics_and_models_and_reevaluate(pendulum_root: pathlib.
 
 
 def test_eval_rules() -> None:
-    assert score.parse_eval_rule("ema") == ("ema", 1, True)
-    assert score.parse_eval_rule("online-stochastic") == ("online", 1, False)
-    assert score.parse_eval_rule("candidates10") == ("ema", 10, True)
-    assert score.parse_eval_rule("online-candidates2") == ("online", 2, True)
+    assert grid_variants.parse_eval_rule("ema") == ("ema", 1, True)
+    assert grid_variants.parse_eval_rule("online-stochastic") == ("online", 1, False)
+    assert grid_variants.parse_eval_rule("candidates10") == ("ema", 10, True)
+    assert grid_variants.parse_eval_rule("online-candidates2") == ("online", 2, True)
     for bad in ("candidates0", "stochastic3", "best"):
         with pytest.raises(ValueError, match="unknown evaluation rule"):
-            score.parse_eval_rule(bad)
+            grid_variants.parse_eval_rule(bad)
 
 
 def test_eta_warmup_from_json() -> None:
     from sb3_pola.common.schedules import WarmupSchedule
 
-    kwargs = score.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 2.0, "rollout_length": 3})
+    kwargs = grid_variants.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 2.0, "rollout_length": 3})
     assert isinstance(kwargs["eta"], WarmupSchedule) and kwargs["eta"](0.2) == 2.0 and kwargs["eta"](0.6) == 0.0
     assert kwargs["rollout_length"] == 3 and "eta_warmup" not in kwargs
-    assert score.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 0.0})["eta"] == 0.0  # BC stays BC
+    assert grid_variants.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 0.0})["eta"] == 0.0  # BC stays BC
 
 
-def test_eval_rule_during_training(pendulum_root: pathlib.Path, tmp_path: pathlib.Path) -> None:
+def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
     """--eval-rule stochastic scores with one seeded sample of the chain and leaves training as it was."""
     import torch as th
 
@@ -212,21 +212,22 @@ def test_eval_rule_during_training(pendulum_root: pathlib.Path, tmp_path: pathli
     # the rule's default leaves a signature as it was before the option existed; the defaults that departed from
     # the paper's form on 2026-12-02 changed it (cpu: cd99bea051, paper: f8a0da1694 before), so that a folder of
     # the old defaults is not resumed under the new ones
-    assert score.PRESETS["cpu"].signature() == "05ed254249" and score.PRESETS["paper"].signature() == "6863b1ac8a"
+    presets = grid_variants.PRESETS
+    assert presets["cpu"].signature() == "05ed254249" and presets["paper"].signature() == "6863b1ac8a"
     base, sampled = tmp_path / "ema", tmp_path / "stochastic"
-    assert run(pendulum_root, base, "--variants", "T1", "--seeds", "0") == 0
-    assert run(pendulum_root, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0
+    assert run(score_data, base, "--variants", "T1", "--seeds", "0") == 0
+    assert run(score_data, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0
     assert json.loads((sampled / "config.json").read_text())["eval_rule"] == "stochastic"
     assert "evaluation rule `stochastic`" in (sampled / "table.md").read_text()
     name = "test_pendulum-v0__T1__seed0.zip"
     params = [POLA.load(folder / "models" / name, device="cpu").policy.state_dict() for folder in (base, sampled)]
     assert all(th.equal(params[0][key], params[1][key]) for key in params[0])  # the evaluation drew no training noise
-    final = score.read_rows(sampled / "scores.csv")[-1]
-    again = {r["rule"]: r for r in score.reevaluate(sampled, ["stochastic", "ema"], 1, "cpu", verbose=0)}
+    final = grid_rows.read_rows(sampled / "scores.csv")[-1]
+    again = {r["rule"]: r for r in reeval.reevaluate(sampled, ["stochastic", "ema"], 1, "cpu", verbose=0)}
     assert float(again["stochastic"]["mean_return"]) == pytest.approx(final["mean_return"])
-    assert float(again["ema"]["mean_return"]) == pytest.approx(score.read_rows(base / "scores.csv")[-1]["mean_return"])
+    assert float(again["ema"]["mean_return"]) == pytest.approx(grid_rows.read_rows(base / "scores.csv")[-1]["mean_return"])
     with pytest.raises(ValueError, match="unknown evaluation rule"):
-        run(pendulum_root, tmp_path / "bad", "--variants", "T1", "--eval-rule", "best")
+        run(score_data, tmp_path / "bad", "--variants", "T1", "--eval-rule", "best")
 
 
 class _GoalEnv:
@@ -255,23 +256,23 @@ class _ConstantModel:
 
 def test_success_rate_column(tmp_path: pathlib.Path) -> None:
     """Goal-reaching envs: the success rate of an evaluation, in scores.csv and table.md; old files keep working."""
-    scores = score.evaluation_scores(_ConstantModel(), _GoalEnv(), 4, seed=0)
+    scores = grid_cell.evaluation_scores(_ConstantModel(), _GoalEnv(), 4, seed=0)
     assert scores["success"] == 0.5 and scores["score"] == 100.0
-    assert math.isnan(score.evaluation_scores(_ConstantModel(), _ConstantEnvWithoutSuccess(), 2, seed=0)["success"])
+    assert math.isnan(grid_cell.evaluation_scores(_ConstantModel(), _ConstantEnvWithoutSuccess(), 2, seed=0)["success"])
     # a scores.csv from before the column: appending rewrites it with the column, old rows get NaN
     csv_path = tmp_path / "scores.csv"
-    old_fields = [f for f in score.CSV_FIELDS if f != "success"]
+    old_fields = [f for f in grid_rows.CSV_FIELDS if f != "success"]
     row = {"dataset": "d", "variant": "T0", "seed": 0, "step": 5, "score": 1.0, "score_std": 0.0, "mean_return": 3.0}
     row |= {"eval_episodes": 4, "wall_s": 1.0}
     csv_path.write_text(",".join(old_fields) + "\n" + ",".join(str(row[f]) for f in old_fields) + "\n")
-    assert math.isnan(score.read_rows(csv_path)[0]["success"])
-    score.append_row(csv_path, {**row, "step": 10, **scores})
-    assert csv_path.read_text().splitlines()[0] == ",".join(score.CSV_FIELDS)
-    rows = score.read_rows(csv_path)
+    assert math.isnan(grid_rows.read_rows(csv_path)[0]["success"])
+    grid_rows.append_row(csv_path, {**row, "step": 10, **scores})
+    assert csv_path.read_text().splitlines()[0] == ",".join(grid_rows.CSV_FIELDS)
+    rows = grid_rows.read_rows(csv_path)
     assert math.isnan(rows[0]["success"]) and rows[1]["success"] == 0.5
-    table = score.markdown_table(rows, ["T0"])
+    table = grid_report.markdown_table(rows, ["T0"])
     assert "final success rate" in table and "| 0.50 |" in table
-    assert "success rate" not in score.markdown_table([{**r, "success": math.nan} for r in rows], ["T0"])
+    assert "success rate" not in grid_report.markdown_table([{**r, "success": math.nan} for r in rows], ["T0"])
 
 
 class _ConstantEnvWithoutSuccess(_GoalEnv):

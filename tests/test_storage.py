@@ -11,23 +11,15 @@ from typing import Any
 
 import pytest
 import torch as th
-from helpers import record_random_dataset
+from helpers import TINY_GRID, comparable
 
-from sb3_pola.experiments import score
-from sb3_pola.experiments.storage import Storage, Workspace, open_workspace
+from sb3_pola.cli import score as score_cli
+from sb3_pola.grid import cell as grid_cell
+from sb3_pola.grid import rows as grid_rows
+from sb3_pola.grid.storage import Storage, Workspace, open_workspace
 from sb3_pola.pola import POLA
 
-TINY = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", "--batch-size", "8", "--net-arch", "8"]
-TINY += ["--n-critics", "2", "--dynamics-steps", "4"]
-TINY += ["--dynamics-kwargs", '{"hidden_dim": 8, "n_layers": 1, "n_members": 2, "n_elites": 1}']
-TINY += ["--preset", "cpu", "--no-compile", "--device", "cpu", "-v", "0", "--datasets", "test/pendulum-v0"]
-
-
-@pytest.fixture(scope="module")
-def pendulum_root(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
-    root = tmp_path_factory.mktemp("storage_data")
-    record_random_dataset(root, "test/pendulum-v0", "Pendulum-v1", 60, ref_scores=(-300.0, 0.0), max_episode_steps=30)
-    return root
+TINY = ["--steps", "6", "--eval-freq", "3", "--eval-episodes", "1", *TINY_GRID, "--datasets", "test/pendulum-v0"]
 
 
 @pytest.fixture
@@ -45,15 +37,10 @@ def url(request: pytest.FixtureRequest, memory_url: str, tmp_path: pathlib.Path)
     return memory_url if request.param == "memory" else (tmp_path / "store").as_uri()
 
 
-def comparable(rows: list[dict[str, Any]]) -> list[tuple]:
-    """Rows without their wall-clock time (str: a NaN success equals NaN)."""
-    return [tuple(str(r[k]) for k in score.CSV_FIELDS if k != "wall_s") for r in rows]
-
-
 def stored_rows(storage: Storage, tmp_path: pathlib.Path, rel: str = "scores.csv") -> list[dict[str, Any]]:
     local = tmp_path / "downloaded" / rel
     assert storage.get(rel, local)
-    return score.read_rows(local)
+    return grid_rows.read_rows(local)
 
 
 def test_put_get_list_remove(url: str, tmp_path: pathlib.Path) -> None:
@@ -128,25 +115,25 @@ def test_workspace_pushes_what_changed(memory_url: str, tmp_path: pathlib.Path, 
 
 
 def test_out_url_needs_its_backend(capsys: pytest.CaptureFixture) -> None:
-    assert score.main(["--out", "nosuchprotocol://bucket/score", "--ray"]) == 2
+    assert score_cli.main(["--out", "nosuchprotocol://bucket/score", "--ray"]) == 2
     assert "--out nosuchprotocol://bucket/score: Protocol not known" in capsys.readouterr().err
 
 
 def _run(root: pathlib.Path, out: str | pathlib.Path, *extra: str) -> int:
-    return score.main([*TINY, "--data-dir", str(root), "--out", str(out), *extra])
+    return score_cli.main([*TINY, "--data-dir", str(root), "--out", str(out), *extra])
 
 
 def test_a_run_into_a_url_equals_a_run_into_a_folder(
-    pendulum_root: pathlib.Path, url: str, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture
+    score_data: pathlib.Path, url: str, tmp_path: pathlib.Path, capsys: pytest.CaptureFixture
 ) -> None:
     folder = tmp_path / "folder"
     grid = ["--variants", "T0", "T1", "--seeds", "0"]
-    assert _run(pendulum_root, folder, *grid) == 0
-    assert _run(pendulum_root, url, *grid) == 0
+    assert _run(score_data, folder, *grid) == 0
+    assert _run(score_data, url, *grid) == 0
     storage = Storage(url)
-    expected = score.read_rows(folder / "scores.csv")
+    expected = grid_rows.read_rows(folder / "scores.csv")
     assert len(expected) == 4 and comparable(stored_rows(storage, tmp_path)) == comparable(expected)
-    names = [score.cell_name("test/pendulum-v0", v, 0) for v in ("T0", "T1")]
+    names = [grid_rows.cell_name("test/pendulum-v0", v, 0) for v in ("T0", "T1")]
     files = set(storage.list(""))
     assert {f"cells/{n}.json" for n in names} | {f"models/{n}.zip" for n in names} <= files
     assert {"config.json", "table.md", "diagnostics.md", "fig_rollout_test_pendulum-v0.png"} <= files
@@ -159,14 +146,14 @@ def test_a_run_into_a_url_equals_a_run_into_a_folder(
         assert all(th.equal(state[key], value) for key, value in expected_state.items()), name
     # the same command again: both cells skipped; another configuration refused; the reports rewritten from the URL
     capsys.readouterr()
-    assert _run(pendulum_root, url, *grid, "-v", "1") == 0
+    assert _run(score_data, url, *grid, "-v", "1") == 0
     assert capsys.readouterr().out.count("done, skipped") == 2
     assert comparable(stored_rows(storage, tmp_path)) == comparable(expected)
-    assert _run(pendulum_root, url, *grid, "--steps", "9") == 2
+    assert _run(score_data, url, *grid, "--steps", "9") == 2
     storage.remove("table.md")
-    assert score.main(["--report-only", "--out", url, "--variants", "T0", "T1"]) == 0
+    assert score_cli.main(["--report-only", "--out", url, "--variants", "T0", "T1"]) == 0
     assert storage.exists("table.md")
-    assert score.main(["--out", url, "--reevaluate", "ema", "-v", "0"]) == 0
+    assert score_cli.main(["--out", url, "--reevaluate", "ema", "-v", "0"]) == 0
     assert storage.get("reeval.csv", tmp_path / "reeval.csv") and storage.exists("reeval.md")
     with (tmp_path / "reeval.csv").open(newline="") as f:
         reeval = {r["variant"]: float(r["score"]) for r in csv.DictReader(f)}
@@ -174,12 +161,12 @@ def test_a_run_into_a_url_equals_a_run_into_a_folder(
 
 
 def test_a_url_run_resumes_an_interrupted_cell(
-    pendulum_root: pathlib.Path, memory_url: str, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
+    score_data: pathlib.Path, memory_url: str, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     cell = ["--variants", "T3-noproducts", "--seeds", "0", "--steps", "9"]
     folder = tmp_path / "folder"
-    assert _run(pendulum_root, folder, *cell) == 0
-    real_evaluate = score.evaluate
+    assert _run(score_data, folder, *cell) == 0
+    real_evaluate = grid_cell.evaluate
     calls = []
 
     def interrupted(*args: Any, **kwargs: Any) -> Any:  # the second evaluation never happens: the process "dies" at step 6
@@ -188,17 +175,17 @@ def test_a_url_run_resumes_an_interrupted_cell(
             raise KeyboardInterrupt
         return real_evaluate(*args, **kwargs)
 
-    monkeypatch.setattr(score, "evaluate", interrupted)
+    monkeypatch.setattr(grid_cell, "evaluate", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        _run(pendulum_root, memory_url, *cell)
+        _run(score_data, memory_url, *cell)
     storage = Storage(memory_url)
-    name = score.cell_name("test/pendulum-v0", "T3-noproducts", 0)
+    name = grid_rows.cell_name("test/pendulum-v0", "T3-noproducts", 0)
     assert [r["step"] for r in stored_rows(storage, tmp_path, f"rows/{name}.csv")] == [3]
     assert storage.exists(f"ckpt/{name}.zip") and not storage.exists(f"cells/{name}.json")
-    monkeypatch.setattr(score, "evaluate", real_evaluate)
-    assert _run(pendulum_root, memory_url, *cell) == 0
+    monkeypatch.setattr(grid_cell, "evaluate", real_evaluate)
+    assert _run(score_data, memory_url, *cell) == 0
     rows = stored_rows(storage, tmp_path)
-    assert comparable(rows) == comparable(score.read_rows(folder / "scores.csv"))
+    assert comparable(rows) == comparable(grid_rows.read_rows(folder / "scores.csv"))
     assert rows[2]["wall_s"] >= rows[0]["wall_s"]
     assert storage.exists(f"train/{name}/progress_from3.csv")  # the resumed segment's statistics
     assert not storage.list("ckpt") and json.loads(storage.fs.cat_file(f"{storage.root}/cells/{name}.json"))["steps"] == 9

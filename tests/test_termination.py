@@ -133,3 +133,29 @@ def test_never_terminates_shape_and_device() -> None:
     assert fn is not None
     out = fn(th.zeros(5, 17), th.zeros(5, 6), th.randn(5, 17))
     assert out.dtype == th.bool and out.shape == (5,) and not out.any()
+
+
+def test_ant_rule_matches_real_env_where_it_terminates() -> None:
+    """Random actions rarely end an Ant episode: states placed above, inside and below the healthy z range do."""
+    env = gym.make("Ant-v5")
+    fn = get_termination_fn("Ant-v5")
+    assert fn is not None
+    obs_list, actions, next_list, terminated = [], [], [], []
+    for i, z in enumerate([1.6, 0.75, 0.05, 1.3, 0.55, 0.1]):
+        env.reset(seed=i)
+        base = env.unwrapped
+        qpos, qvel = base.init_qpos.copy(), base.init_qvel.copy()
+        qpos[2] = z
+        base.set_state(qpos, qvel)
+        obs = base._get_obs()
+        action = np.zeros(env.action_space.shape, dtype=np.float32)
+        next_obs, _, term, _, _ = env.step(action)
+        obs_list.append(obs)
+        actions.append(action)
+        next_list.append(next_obs)
+        terminated.append(term)
+    env.close()
+    terminated_arr = np.array(terminated)
+    assert terminated_arr.any() and not terminated_arr.all()
+    pred = fn(th.as_tensor(np.array(obs_list)), th.as_tensor(np.array(actions)), th.as_tensor(np.array(next_list)))
+    np.testing.assert_array_equal(pred.numpy(), terminated_arr)

@@ -3,7 +3,7 @@ import numpy as np
 import torch as th
 from torch import nn
 
-from sb3_pola.common.torch_layers import StateProductsExtractor, VectorizedLinear, pairwise_products, vectorized_mlp
+from sb3_pola.common.torch_layers import StateProductsExtractor, VectorizedLinear, vectorized_mlp
 
 
 def test_vectorized_linear_equals_loop_of_linears():
@@ -33,10 +33,11 @@ def test_vectorized_mlp_members_are_independent():
     assert not th.equal(net[0].weight[0], net[0].weight[1])
 
 
-def test_pairwise_products_values_and_order():
+def test_state_products_values_and_order():
+    extractor = StateProductsExtractor(gym.spaces.Box(-np.inf, np.inf, (4,), np.float32))  # mean 0, std 1
     x = th.tensor([[1.0, 2.0, 3.0, 4.0]])
-    expected = th.tensor([[2.0, 3.0, 4.0, 6.0, 8.0, 12.0]])  # (0,1) (0,2) (0,3) (1,2) (1,3) (2,3)
-    assert th.equal(pairwise_products(x), expected)
+    products = th.tensor([[2.0, 3.0, 4.0, 6.0, 8.0, 12.0]])  # (0,1) (0,2) (0,3) (1,2) (1,3) (2,3)
+    assert th.equal(extractor(x), th.cat((x, products), dim=-1))
 
 
 def test_state_products_extractor_shapes_and_normalisation():

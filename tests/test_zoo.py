@@ -215,6 +215,7 @@ def test_unknown_command_and_env(pendulum: pathlib.Path) -> None:
 # ----------------------------------------------------------------------------- optimize
 
 
+@pytest.mark.slow  # two Optuna workers; the sampler and launch: test_train_enjoy_resume, test_yaml_entry_builds_model
 def test_optimize_two_workers_share_a_study(pendulum: pathlib.Path) -> None:
     import optuna
 

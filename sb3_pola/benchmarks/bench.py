@@ -24,20 +24,16 @@ from typing import Any
 
 import torch as th
 
-from sb3_pola.cli import missing_extra, missing_extra_message
+from sb3_pola.common.extras import missing_extra, missing_extra_message
+from sb3_pola.common.machine import cpu_name, gpu_name
 
 SECTIONS = ("train", "predict", "export", "data", "dynamics")
 
 
 def machine_info(device: str) -> dict[str, Any]:
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as file:
-            cpu = next(line.split(":", 1)[1].strip() for line in file if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
+    """The machine and the command of a benchmark run (:mod:`sb3_pola.common.machine`), for the results' JSON."""
     info: dict[str, Any] = {
-        "cpu": cpu,
+        "cpu": cpu_name(),
         "cpu_count": os.cpu_count(),
         "torch_threads": th.get_num_threads(),
         "torch": th.__version__,
@@ -46,8 +42,9 @@ def machine_info(device: str) -> dict[str, Any]:
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "command": "sb3-pola bench " + " ".join(sys.argv[2:] if sys.argv[1:2] == ["bench"] else sys.argv[1:]),
     }
-    if th.device(device).type == "cuda":
-        info["gpu"] = th.cuda.get_device_name()
+    gpu = gpu_name(device)
+    if gpu is not None:
+        info["gpu"] = gpu
     return info
 
 

@@ -114,22 +114,6 @@ def matmul_replay(calls: Counter[tuple[Any, ...]], device: th.device | str) -> t
     return replay, total_flops
 
 
-def matmul_roofline(calls: Counter[tuple[Any, ...]], device: th.device | str, reps: int = 5) -> dict[str, float]:
-    """Time the recorded matmuls alone (same shapes, strides and counts): the machine's matmul FLOP/s on them.
-
-    :param calls: from :class:`MatmulRecorder`
-    :param device: where to run them
-    :param reps: timing repetitions per shape (median)
-    :return: ``flops`` (of the recorded matmuls), ``seconds`` (their total median time), ``flops_per_s``
-    """
-    total_flops, total_time = 0, 0.0
-    for (func, key), count in calls.items():
-        args = [_strided_randn(k[0], k[1], k[2], device) if isinstance(k, tuple) else k for k in key]
-        total_time += count * median_time(lambda: func(*args), reps, device)  # noqa: B023
-        total_flops += count * _matmul_flops(func, key)
-    return {"flops": float(total_flops), "seconds": total_time, "flops_per_s": total_flops / max(total_time, 1e-12)}
-
-
 def count_flops(fn: Callable[[], Any]) -> tuple[int, Counter[tuple[Any, ...]]]:
     """FLOPs of one call of ``fn`` (``torch.utils.flop_counter``) and the matmuls it ran."""
     recorder = MatmulRecorder()

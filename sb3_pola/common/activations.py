@@ -1,4 +1,6 @@
-"""Mish with an optional compiled, fused kernel (one pass over memory forward and backward).
+"""Every form of Mish in one place: the one-``exp`` identity (:func:`mish_exp`), its compiled, fused kernel
+(:func:`compiled_mish`, :class:`FusedMish`), the form with a finite second derivative
+(:class:`TwiceDifferentiableMish`) and the eager in-place form of the no-grad chain (:func:`inference_mish`).
 
 Eager ``F.mish`` evaluates ``x * tanh(log1p(exp(x)))`` with three transcendental functions and its
 backward recomputes them; on CPU it costs about as much as the matmul before it. The compiled form uses
@@ -28,6 +30,17 @@ def mish_exp(x: th.Tensor) -> th.Tensor:
     e = th.exp(x.clamp(max=EXP_CLAMP))
     n = e * (e + 2.0)
     return x * n / (n + 2.0)
+
+
+def inference_mish(x: th.Tensor) -> th.Tensor:
+    """Mish for the no-grad chain, eager and in place: ``x n / (n + 2)``, ``n = e^x (e^x + 2)`` (one ``exp``
+    instead of ``F.mish``'s three transcendentals) on tensors of a few thousand elements or more; ``F.mish``
+    below, where each extra kernel launch costs more than it saves. No autograd."""
+    if x.numel() < 4096 or x.device.type != "cpu":  # on GPUs F.mish is one fused kernel already
+        return F.mish(x)
+    e = x.clamp(max=EXP_CLAMP).exp_()
+    n = e.add(2.0).mul_(e)  # e^x (e^x + 2)
+    return n.div_(n + 2.0).mul_(x)
 
 
 # below this many elements the eager kernel wins: a compiled call's fixed overhead (guards) exceeds the saving

@@ -7,7 +7,7 @@ dynamics model and its ``dynamics_fitted`` flag, both optimizers, ``num_timestep
 also an ordinary model file. Files are written atomically: a temp file in the same folder, fsync,
 ``os.replace``, fsync of the folder; a kill at any moment leaves either the previous checkpoint or
 the new one, never a truncated file. Weights with NaN or inf are never written (:class:`DivergenceError`,
-defined with :class:`ModelFileError` and :func:`validate_model_file` in :mod:`sb3_pola.common.errors`).
+defined with :class:`ModelFileError` and :func:`validate_model_file` in :mod:`sb3_pola.common.integrity`).
 
 Usage::
 
@@ -52,7 +52,7 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import MaybeCallback
 
-from sb3_pola.common.errors import DivergenceError, ModelFileError, validate_model_file
+from sb3_pola.common.integrity import DivergenceError, ModelFileError, validate_model_file
 
 if TYPE_CHECKING:
     from sb3_pola.common.offline_algorithm import OfflineAlgorithm

@@ -15,16 +15,10 @@ metadata, so a changed dataset never gets stale arrays).
 
 from __future__ import annotations
 
-import argparse
 import contextlib
-import hashlib
 import json
 import os
 import pathlib
-import shutil
-import tempfile
-import warnings
-import zlib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeAlias
@@ -32,8 +26,9 @@ from typing import TYPE_CHECKING, Any, TypeAlias
 import gymnasium as gym
 import numpy as np
 
+from sb3_pola.common.dataset_cache import ARRAY_FIELDS, cache_path, fingerprint, load_cache, save_cache
 from sb3_pola.common.dict_obs import check_dict_space, flat_space, flatten_env, flatten_episode_observations
-from sb3_pola.common.scores import normalized_score
+from sb3_pola.common.metrics import normalized_score
 
 if TYPE_CHECKING:
     from minari import MinariDataset
@@ -41,11 +36,9 @@ if TYPE_CHECKING:
 # a dataset on disk: a Minari id, a dataset folder (``os.PathLike`` or a path string) or a ``minari.MinariDataset``
 DatasetLocation: TypeAlias = "str | os.PathLike[str] | MinariDataset"
 
-# Bump when the cached arrays change meaning: old caches are then never read.
-CACHE_VERSION = 2
 METADATA_FILE = "metadata.json"
-CACHE_MANIFEST = "manifest.json"
-_ARRAY_FIELDS = ("observations", "actions", "rewards", "next_observations", "dones", "episode_returns")
+# D4RL's dataset kinds, as `sb3-pola collect` makes them (``<env>/<kind>-v<version>``)
+D4RL_KINDS = ("random", "medium", "expert", "medium-replay", "medium-expert")
 # Rows per chunk when computing statistics, so no full-size float64 temporary is made.
 _STATS_CHUNK = 65536
 
@@ -123,7 +116,7 @@ class OfflineDataset:
     @property
     def nbytes(self) -> int:
         """Bytes held by the transition arrays."""
-        return sum(int(getattr(self, name).nbytes) for name in _ARRAY_FIELDS)
+        return sum(int(getattr(self, name).nbytes) for name in ARRAY_FIELDS)
 
     def obs_stats(self, eps: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
         """Mean and standard deviation of the observations (float64 accumulation, chunked).
@@ -151,11 +144,6 @@ class OfflineDataset:
         :return: the score, or None (warned once) when the dataset has no reference scores
         """
         return normalized_score(returns, self.ref_min_score, self.ref_max_score, source=f"Dataset {self.dataset_id!r}")
-
-    def rescale_action(self, action: np.ndarray) -> np.ndarray:
-        """Map env actions to [-1, 1] (what the arrays hold)."""
-        low, high = self.action_space.low, self.action_space.high
-        return np.clip(2.0 * (action - low) / (high - low) - 1.0, -1.0, 1.0)
 
     def unscale_action(self, scaled_action: np.ndarray) -> np.ndarray:
         """Map [-1, 1] actions back to the env's bounds."""
@@ -265,90 +253,6 @@ def _spaces(metadata: dict[str, Any], data_dir: pathlib.Path) -> tuple[gym.Space
         return deserialize_space(metadata["observation_space"]), deserialize_space(metadata["action_space"])
     storage = MinariStorage.read(data_dir)  # recovers spaces from the env spec
     return storage.observation_space, storage.action_space
-
-
-# --------------------------------------------------------------------------- cache
-
-
-def _fingerprint(data_dir: pathlib.Path, metadata: dict[str, Any]) -> str:
-    """Hash of everything a cache entry depends on: file sizes and mtimes (ns), and the metadata."""
-    digest = hashlib.sha256()
-    digest.update(f"v{CACHE_VERSION}".encode())
-    for path in sorted(p for p in data_dir.rglob("*") if p.is_file()):
-        stat = path.stat()
-        digest.update(f"{path.relative_to(data_dir).as_posix()}:{stat.st_size}:{stat.st_mtime_ns};".encode())
-    digest.update(json.dumps(metadata, sort_keys=True, default=str).encode())
-    return digest.hexdigest()
-
-
-def _cache_path(cache_dir: pathlib.Path, dataset_id: str | None, total_steps: int, fingerprint: str) -> pathlib.Path:
-    safe_id = "".join(c if c.isalnum() or c in "-_." else "_" for c in (dataset_id or "dataset"))
-    return cache_dir / f"{safe_id}-{total_steps}-{fingerprint[:24]}"
-
-
-def _crc(array: np.ndarray) -> int:
-    return zlib.crc32(np.ascontiguousarray(array).view(np.uint8).reshape(-1).data)
-
-
-def _load_cache(path: pathlib.Path, n_steps: int, obs_dim: int, act_dim: int) -> dict[str, np.ndarray] | None:
-    """Arrays from a cache folder, or None if missing or unusable (unreadable, shape or CRC-32 mismatch).
-
-    One ``.npy`` per array (``np.load`` reads them with a single ``fromfile``, several times
-    faster than an ``.npz``) plus ``manifest.json`` with each array's shape and CRC-32.
-    """
-    manifest_file = path / CACHE_MANIFEST
-    if not manifest_file.is_file():
-        return None
-    expected_shapes = {
-        "observations": (n_steps, obs_dim),
-        "next_observations": (n_steps, obs_dim),
-        "actions": (n_steps, act_dim),
-        "rewards": (n_steps,),
-        "dones": (n_steps,),
-    }
-    try:
-        manifest = json.loads(manifest_file.read_text())
-        arrays = {}
-        for name in _ARRAY_FIELDS:
-            array = np.load(path / f"{name}.npy", allow_pickle=False)
-            entry = manifest[name]
-            dtype = np.float64 if name == "episode_returns" else np.float32
-            shape = expected_shapes.get(name, tuple(entry["shape"]))
-            if array.dtype != dtype or array.shape != shape or list(array.shape) != entry["shape"]:
-                raise ValueError(f"{name} is {array.dtype} {array.shape}, expected {np.dtype(dtype)} {shape}")
-            if _crc(array) != entry["crc32"]:
-                raise ValueError(f"{name} fails its CRC-32 check")
-            arrays[name] = array
-    except (OSError, ValueError, KeyError, TypeError, EOFError) as error:
-        warnings.warn(f"Corrupt dataset cache {path} ({error}): rebuilding it")
-        return None
-    return arrays
-
-
-def _save_cache(path: pathlib.Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write the cache atomically: a temporary folder renamed into place; failures only warn."""
-    tmp_dir = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp_dir = pathlib.Path(tempfile.mkdtemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp"))
-        manifest = {}
-        for name, array in arrays.items():
-            np.save(tmp_dir / f"{name}.npy", array, allow_pickle=False)
-            manifest[name] = {"shape": list(array.shape), "dtype": str(array.dtype), "crc32": _crc(array)}
-        (tmp_dir / CACHE_MANIFEST).write_text(json.dumps(manifest))
-        if path.exists():  # a corrupt entry being rebuilt (a valid one is never rewritten)
-            shutil.rmtree(path, ignore_errors=True)
-        try:
-            os.replace(tmp_dir, path)
-            tmp_dir = None
-        except OSError:
-            if not (path / CACHE_MANIFEST).is_file():  # else another process wrote the same entry first
-                raise
-    except OSError as error:
-        warnings.warn(f"Could not write dataset cache {path}: {error}")
-    finally:
-        if tmp_dir is not None:
-            shutil.rmtree(tmp_dir, ignore_errors=True)
 
 
 # --------------------------------------------------------------------------- reading episodes
@@ -517,8 +421,8 @@ def load_offline_dataset(
     cache_file = None
     if use_cache:
         root = pathlib.Path(cache_dir) if cache_dir is not None else default_cache_dir()
-        cache_file = _cache_path(root, dataset_id, n_steps, _fingerprint(data_dir, metadata))
-        arrays = _load_cache(cache_file, n_steps, obs_dim, act_dim)
+        cache_file = cache_path(root, dataset_id, n_steps, fingerprint(data_dir, metadata))
+        arrays = load_cache(cache_file, n_steps, obs_dim, act_dim)
         if arrays is not None and len(arrays["episode_returns"]) != n_episodes:
             arrays = None
     if arrays is None:
@@ -528,7 +432,7 @@ def load_offline_dataset(
         episodes = storage.get_episodes(range(n_episodes))
         arrays = _build_arrays(episodes, n_steps, n_episodes, obs_dim, act_dim, action_space, where, progress, dict_space)
         if cache_file is not None:
-            _save_cache(cache_file, arrays)
+            save_cache(cache_file, arrays)
 
     ref_min, ref_max = metadata.get("ref_min_score"), metadata.get("ref_max_score")
     return OfflineDataset(
@@ -607,45 +511,3 @@ def synthetic_dataset(n: int, obs_dim: int, act_dim: int, env_id: str | None = N
         dataset_id="synthetic",
         env_id=env_id,
     )
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``sb3-pola datasets``: list local datasets (id, steps, episodes, env, reference scores)."""
-    parser = argparse.ArgumentParser(prog="sb3-pola datasets", description="List the Minari datasets found locally.")
-    parser.parse_args(argv)
-    rows = []
-    seen = set()
-    for root in _search_roots():
-        for dataset_id, data_dir in _scan(root).items():
-            if dataset_id in seen:
-                continue  # the Minari folder shadows the shipped copy, as in load_offline_dataset
-            seen.add(dataset_id)
-            try:
-                meta = read_metadata(data_dir)
-            except (OSError, ValueError) as error:
-                rows.append((dataset_id, "?", "?", f"unreadable: {error}", "", "", str(root)))
-                continue
-            rows.append(
-                (
-                    dataset_id,
-                    str(meta.get("total_steps", "?")),
-                    str(meta.get("total_episodes", "?")),
-                    _env_id(meta) or "?",
-                    str(meta.get("ref_min_score", "-")),
-                    str(meta.get("ref_max_score", "-")),
-                    str(root),
-                )
-            )
-    print(f"datasets in {minari_datasets_dir()} (MINARI_DATASETS_PATH) and {package_datasets_dir()} (shipped)")
-    if not rows:
-        print("none found: make one with `sb3-pola collect` or `minari download <id>`")
-        return 0
-    header = ("id", "steps", "episodes", "env", "ref_min", "ref_max", "root")
-    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
-    for row in [header, *rows]:
-        print("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=False)).rstrip())
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -25,8 +25,8 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.datasets import DatasetLocation, OfflineDataset, load_offline_dataset, make_env, same_spaces
 from sb3_pola.common.dict_obs import flatten_env, flatten_observation
-from sb3_pola.common.errors import DivergenceError, validate_model_file
-from sb3_pola.common.scores import normalized_score
+from sb3_pola.common.integrity import DivergenceError, validate_model_file
+from sb3_pola.common.metrics import normalized_score
 
 SelfOfflineAlgorithm = TypeVar("SelfOfflineAlgorithm", bound="OfflineAlgorithm")
 
@@ -305,7 +305,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         return self
 
     def check_finite(self, parameters_only: bool = False, consequence: str = "Training stopped") -> None:
-        """Raise :class:`~sb3_pola.common.errors.DivergenceError` if a parameter or a loss is NaN or inf.
+        """Raise :class:`~sb3_pola.common.integrity.DivergenceError` if a parameter or a loss is NaN or inf.
 
         The losses checked are the training statistics accumulated since the last log dump, so a loss
         that was non-finite at any step since then is caught. All tensors are checked with one host sync.
@@ -349,7 +349,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         :param path: file path or file object
         :param exclude: attributes not to save
         :param include: attributes to save even if excluded by default
-        :param check_finite: raise :class:`~sb3_pola.common.errors.DivergenceError` instead of saving
+        :param check_finite: raise :class:`~sb3_pola.common.integrity.DivergenceError` instead of saving
             non-finite parameters (``False`` saves them anyway, e.g. for debugging)
         """
         if check_finite:
@@ -379,7 +379,7 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         :param force_reset: reset the env before training (SB3)
         :param kwargs: attributes to change, e.g. ``dataset=`` to continue training (its replay buffer is built now)
         :raises FileNotFoundError: no such file
-        :raises ~sb3_pola.common.errors.ModelFileError: truncated, corrupt, or saved by another algorithm
+        :raises ~sb3_pola.common.integrity.ModelFileError: truncated, corrupt, or saved by another algorithm
         :raises ValueError: ``env`` has other spaces than the model
         """
         if isinstance(path, str | os.PathLike):

@@ -11,22 +11,23 @@ rescaling to the action space's bounds. Input ``obs`` ``[batch, obs_dim]`` (floa
 
 from __future__ import annotations
 
-import argparse
 import copy
 import logging
 import os
 import pathlib
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import torch as th
 from gymnasium import spaces
 from torch import nn
-from torch.nn import functional as F
 
-from sb3_pola.common.activations import FusedMish
+from sb3_pola.common.activations import FusedMish, inference_mish
 from sb3_pola.common.torch_layers import StateProductsExtractor
+from sb3_pola.pola.fast_sampling import InferencePlan, inference_plan
+from sb3_pola.pola.fast_sampling import _run_plan as run_plan  # the chain predict runs (private there)
 from sb3_pola.pola.policies import DiffusionActor, POLAPolicy
 
 EXPORT_FORMATS = ("onnx", "torchscript")
@@ -43,9 +44,11 @@ class PolicyExportError(ValueError):
 class DeterministicPolicyGraph(nn.Module):
     """``model.predict(obs, deterministic=True)`` as a plain module of static shapes: ``[B, obs] -> [B, A]``.
 
-    Holds copies of the weights it needs (the predict actor's noise predictor, the normalisation
-    statistics, the action bounds); the diffusion step's time embedding goes through the first layer
-    once here, so each unrolled step adds a constant bias. Built by :func:`export_policy`.
+    The reverse chain is ``predict``'s own fast form (:func:`~sb3_pola.pola.fast_sampling.inference_plan` and the
+    loop that runs it): the predict actor's weights rearranged once (each step's time embedding through the first
+    layer, the reverse step folded into the last layer), held here as buffers, and the chain unrolled over its fixed
+    number of steps; only the activation differs (``nn.Mish`` for the eager in-place form). Built by
+    :func:`export_policy`.
 
     :param policy: the policy to reproduce (``n_action_samples=1``, finite action bounds)
     """
@@ -54,8 +57,11 @@ class DeterministicPolicyGraph(nn.Module):
     obs_std: th.Tensor
     idx_i: th.Tensor
     idx_j: th.Tensor
-    w_state: th.Tensor
-    w_action: th.Tensor
+    w_state_t: th.Tensor
+    b_in: th.Tensor
+    w_action_t: th.Tensor
+    time_proj: th.Tensor
+    w_last_t: th.Tensor
     step_bias: th.Tensor
     action_low: th.Tensor
     action_high: th.Tensor
@@ -66,63 +72,71 @@ class DeterministicPolicyGraph(nn.Module):
         extractor = policy.features_extractor
         assert isinstance(extractor, StateProductsExtractor)
         actor = policy.actor_ema if policy.predict_actor == "ema" else policy.actor
-        a_dim, t_dim = actor.action_dim, actor.time_embedding_dim
         with th.no_grad():
             self.register_buffer("obs_mean", extractor.obs_mean.detach().cpu().float().clone())
             self.register_buffer("obs_std", extractor.obs_std.detach().cpu().float().clone())
             self.use_state_products = extractor.use_state_products
             self.register_buffer("idx_i", extractor.idx_i.detach().cpu().clone())
             self.register_buffer("idx_j", extractor.idx_j.detach().cpu().clone())
-            cpu_actor = copy.deepcopy(actor).cpu().float()
-            weight = cpu_actor.input_layer.weight.detach()  # [H, A + time + F]
-            self.register_buffer("w_action", weight[:, :a_dim].clone())  # [H, A]
-            self.register_buffer("w_state", weight[:, a_dim + t_dim :].clone())  # [H, F]
-            time_proj = F.linear(cpu_actor.time_mlp(cpu_actor.step_indices), weight[:, a_dim : a_dim + t_dim])  # [n, H]
-            self.register_buffer("step_bias", time_proj + cpu_actor.input_layer.bias.detach())  # [n, H]
-            layers = [_exportable_layer(m) for m in cpu_actor.trunk]
-            self.trunk = nn.Sequential(*layers).requires_grad_(False)
+            plan = inference_plan(copy.deepcopy(actor).cpu().float(), copy_weights=True)
+            for name in ("w_state_t", "b_in", "w_action_t", "time_proj", "w_last_t"):
+                self.register_buffer(name, getattr(plan, name).detach().clone())
+            # the hidden layers: (bias, W^T) pairs as buffers, activations as plain modules
+            self.hidden_kinds: list[str] = []
+            activations = []
+            for i, layer in enumerate(plan.hidden):
+                if isinstance(layer, tuple):
+                    self.register_buffer(f"hidden_b{i}", layer[0].detach().clone())
+                    self.register_buffer(f"hidden_w{i}", layer[1].detach().clone())
+                    self.hidden_kinds.append("linear")
+                else:
+                    activations.append(_exportable_activation(layer))
+                    self.hidden_kinds.append("activation")
+            self.activations = nn.ModuleList(activations).requires_grad_(False)
+            self.register_buffer("step_bias", th.stack([bias_t.detach().clone() for _, bias_t, *_ in plan.steps]))
             assert isinstance(policy.action_space, spaces.Box)
             self.register_buffer("action_low", th.as_tensor(policy.action_space.low, dtype=th.float32).flatten())
             self.register_buffer("action_high", th.as_tensor(policy.action_space.high, dtype=th.float32).flatten())
-        # (sqrt(1 / abar_t), sqrt(1 / abar_t - 1), posterior mean coefficients c1, c2) per step: Python floats,
-        # constants of the unrolled graph
-        self.step_coefs = [coefs[:4] for coefs in actor.schedule.step_constants]
+        # per step (alpha, c1 recip, c1, c2, sigma): Python floats, constants of the unrolled graph
+        self.step_coefs = [(alpha, x_coef, coef1, coef2, sigma) for alpha, _, x_coef, coef1, coef2, sigma in plan.steps]
         self.obs_dim = int(self.obs_mean.shape[0])
-        self.action_dim = a_dim
+        self.action_dim = actor.action_dim
         self.eval()
 
     @property
     def n_diffusion_steps(self) -> int:
         return len(self.step_coefs)
 
+    def plan(self) -> InferencePlan:
+        """The :class:`~sb3_pola.pola.fast_sampling.InferencePlan` of the held weights."""
+        hidden: list[tuple[th.Tensor, th.Tensor] | Callable[[th.Tensor], th.Tensor]] = []
+        activations = iter(self.activations)
+        for i, kind in enumerate(self.hidden_kinds):
+            if kind == "linear":
+                hidden.append((getattr(self, f"hidden_b{i}"), getattr(self, f"hidden_w{i}")))
+            else:
+                hidden.append(next(activations))
+        steps = [
+            (alpha, self.step_bias[t], x_coef, coef1, coef2, sigma)
+            for t, (alpha, x_coef, coef1, coef2, sigma) in enumerate(self.step_coefs)
+        ]
+        return InferencePlan(self.w_state_t, self.b_in, self.w_action_t, self.time_proj, hidden, self.w_last_t, steps)
+
     def forward(self, obs: th.Tensor) -> th.Tensor:
         x = (obs.float() - self.obs_mean) / self.obs_std  # [B, n]
         if self.use_state_products:
             x = th.cat((x, x[:, self.idx_i] * x[:, self.idx_j]), dim=-1)  # [B, n + n(n-1)/2]
-        state_proj = F.linear(x, self.w_state)  # [B, H]
-        action: th.Tensor | None = None  # a_T = 0: the noise-free chain's start contributes nothing
-        for t in reversed(range(self.n_diffusion_steps)):
-            h = state_proj + self.step_bias[t]
-            if action is not None:
-                h = h + F.linear(action, self.w_action)
-            eps = self.trunk(h)  # [B, A]
-            recip, recipm1, coef1, coef2 = self.step_coefs[t]
-            # NoiseSchedule.step without noise: the posterior mean with the predicted x_0 clipped to the action bounds
-            if action is None:
-                action = (eps * -recipm1).clamp(-1.0, 1.0) * coef1
-            else:
-                action = (action * recip - eps * recipm1).clamp(-1.0, 1.0) * coef1 + action * coef2
-        assert action is not None
-        action = action.clamp(-1.0, 1.0)
+        action = run_plan(self.plan(), x, None)  # the noise-free chain from a_T = 0, clipped to [-1, 1]
         # SB3's unscale_action: [-1, 1] -> [low, high]
         return self.action_low + 0.5 * (action + 1.0) * (self.action_high - self.action_low)
 
 
-def _exportable_layer(module: nn.Module) -> nn.Module:
-    """A trunk layer as a plain module: the compiled Mish (Python-side dispatch) becomes ``nn.Mish``."""
-    if isinstance(module, FusedMish):
+def _exportable_activation(layer: Callable[[th.Tensor], th.Tensor]) -> nn.Module:
+    """A plan's activation as a plain module: the no-grad chain's in-place Mish and the compiled one become ``nn.Mish``."""
+    if layer is inference_mish or isinstance(layer, (FusedMish, nn.Mish)):
         return nn.Mish()
-    return copy.deepcopy(module)
+    assert isinstance(layer, nn.Module), f"cannot export the activation {layer!r}"
+    return copy.deepcopy(layer)
 
 
 def check_exportable(policy: Any) -> None:
@@ -277,37 +291,3 @@ def _export_onnx(graph: DeterministicPolicyGraph, example: th.Tensor, path: path
         registry_logger.setLevel(level)
     assert program is not None
     program.save(str(path), external_data=False)
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="sb3-pola export", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("model", help="a saved POLA model (.zip)")
-    parser.add_argument("out", help="output file")
-    parser.add_argument(
-        "--format",
-        choices=EXPORT_FORMATS,
-        default=None,
-        help=f"default: torchscript if OUT ends in {', '.join(TORCHSCRIPT_SUFFIXES)}, else onnx",
-    )
-    args = parser.parse_args(argv)
-    from sb3_pola.pola.pola import POLA
-
-    model = POLA.load(args.model, device="cpu")
-    fmt = args.format or _infer_format(args.out)
-    try:
-        out = model.export_policy(args.out, format=fmt)
-    except PolicyExportError as error:
-        parser.exit(1, f"sb3-pola export: {error}\n")
-    policy = model.policy
-    print(
-        f"wrote {out} ({fmt}): {INPUT_NAME} [batch, {policy.observation_space.shape[0]}] float32 -> "  # type: ignore[index]
-        f"{OUTPUT_NAME} [batch, {policy.action_space.shape[0]}], {policy.predict_actor} actor, "  # type: ignore[index]
-        f"{policy.n_diffusion_steps} denoising steps"
-    )
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -28,7 +28,7 @@ import torch as th
 from torch import nn
 from torch.nn import functional as F
 
-from sb3_pola.common.activations import EXP_CLAMP
+from sb3_pola.common.activations import inference_mish
 
 if TYPE_CHECKING:  # policies imports this module
     from sb3_pola.pola.policies import DiffusionActor
@@ -36,17 +36,6 @@ if TYPE_CHECKING:  # policies imports this module
 # rows per chunk of the no-grad chain: a chunk's [rows, width] float32 temporaries stay in cache and below
 # glibc's mmap threshold (larger ones are fresh mappings, which makes every elementwise op slower)
 INFERENCE_CHUNK = 256
-
-
-def inference_mish(x: th.Tensor) -> th.Tensor:
-    """Mish for the no-grad chain, eager and in place: ``x n / (n + 2)``, ``n = e^x (e^x + 2)`` (one ``exp``
-    instead of ``F.mish``'s three transcendentals) on tensors of a few thousand elements or more; ``F.mish``
-    below, where each extra kernel launch costs more than it saves. No autograd."""
-    if x.numel() < 4096 or x.device.type != "cpu":  # on GPUs F.mish is one fused kernel already
-        return F.mish(x)
-    e = x.clamp(max=EXP_CLAMP).exp_()
-    n = e.add(2.0).mul_(e)  # e^x (e^x + 2)
-    return n.div_(n + 2.0).mul_(x)
 
 
 def chain_noise(

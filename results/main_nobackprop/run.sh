@@ -1,3 +1,0 @@
-#!/usr/bin/env bash
-# #12: the main job (paper's form) with the look-ahead states detached from the actor
-exec bash "$(dirname "$0")/../main_seeds.sh" results/main_nobackprop '{"backprop_through_model": false}' "$@"
