@@ -288,3 +288,15 @@ def test_deterministic_predict_draws_the_observations_noise():
     assert th.allclose(policy._predict(obs, deterministic=True), sample_no_grad(policy.actor_ema, feats, deterministic=True))
     with pytest.raises(ValueError, match="deterministic_rule"):
         model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule="mode")))
+
+
+@pytest.mark.parametrize("rule", ["observation_noise", "noise_free"])
+def test_exported_graph_follows_the_deterministic_rule(rule, tmp_path):
+    data = synthetic_dataset(300, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule=rule)))
+    model.train(gradient_steps=5, batch_size=32)
+    path = model.export_policy(tmp_path / "policy.pt", format="torchscript")
+    graph = th.jit.load(str(path))
+    obs = np.random.default_rng(1).normal(size=(9, 3)).astype(np.float32)
+    actions, _ = model.predict(obs, deterministic=True)
+    assert np.allclose(graph(th.as_tensor(obs)).numpy(), actions, atol=1e-5)

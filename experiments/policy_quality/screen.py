@@ -44,7 +44,7 @@ RULES = {
 
 def episodes(model: POLA, env: Any, n: int, seed: int, deterministic: bool) -> tuple[np.ndarray, list[bool | None]]:
     """Returns and successes of ``n`` episodes, reset with seeds ``seed + i`` (the score protocol's)."""
-    from sb3_pola.common.scores import update_success
+    from sb3_pola.common.metrics import update_success
 
     returns, successes = [], []
     with th.random.fork_rng():

@@ -1,9 +1,10 @@
 """Export the deterministic policy as one static graph (ONNX or TorchScript) that runs without sb3_pola.
 
 The graph maps a batch of raw observations to the actions ``model.predict(obs, deterministic=True)``
-returns: the state normalisation, the pairwise state products, the noise-free reverse chain of the
-predict actor (EMA or online) unrolled over its fixed number of steps, the clip to ``[-1, 1]`` and the
-rescaling to the action space's bounds. Input ``obs`` ``[batch, obs_dim]`` (float32), output
+returns: the state normalisation, the pairwise state products, the reverse chain of the predict actor (EMA or
+online) unrolled over its fixed number of steps, with the observation's own noise (``deterministic_rule=
+"observation_noise"``, the default) or none (``"noise_free"``), the clip to ``[-1, 1]`` and the rescaling to the
+action space's bounds. Input ``obs`` ``[batch, obs_dim]`` (float32), output
 ``action`` ``[batch, action_dim]``, with a dynamic batch dimension.
 
 ``sb3-pola export MODEL.zip OUT [--format onnx|torchscript]``.
@@ -26,9 +27,8 @@ from torch import nn
 
 from sb3_pola.common.activations import FusedMish, inference_mish
 from sb3_pola.common.torch_layers import StateProductsExtractor
-from sb3_pola.pola.fast_sampling import InferencePlan, inference_plan
-from sb3_pola.pola.fast_sampling import _run_plan as run_plan  # the chain predict runs (private there)
-from sb3_pola.pola.policies import DiffusionActor, POLAPolicy
+from sb3_pola.pola.fast_sampling import InferencePlan, inference_plan, run_plan
+from sb3_pola.pola.policies import DiffusionActor, POLAPolicy, noise_from_projection, observation_noise_projection
 
 EXPORT_FORMATS = ("onnx", "torchscript")
 INPUT_NAME = "obs"
@@ -94,6 +94,14 @@ class DeterministicPolicyGraph(nn.Module):
                     self.hidden_kinds.append("activation")
             self.activations = nn.ModuleList(activations).requires_grad_(False)
             self.register_buffer("step_bias", th.stack([bias_t.detach().clone() for _, bias_t, *_ in plan.steps]))
+            # deterministic_rule="observation_noise": the fixed projection of the observation's noise (float64)
+            self.observation_noise = policy.deterministic_rule == "observation_noise"
+            if self.observation_noise:
+                projection, offset = observation_noise_projection(
+                    extractor.obs_mean.shape[0], actor.n_diffusion_steps, actor.action_dim, policy.predict_seed
+                )
+                self.register_buffer("noise_projection", projection)
+                self.register_buffer("noise_offset", offset)
             assert isinstance(policy.action_space, spaces.Box)
             self.register_buffer("action_low", th.as_tensor(policy.action_space.low, dtype=th.float32).flatten())
             self.register_buffer("action_high", th.as_tensor(policy.action_space.high, dtype=th.float32).flatten())
@@ -126,7 +134,10 @@ class DeterministicPolicyGraph(nn.Module):
         x = (obs.float() - self.obs_mean) / self.obs_std  # [B, n]
         if self.use_state_products:
             x = th.cat((x, x[:, self.idx_i] * x[:, self.idx_j]), dim=-1)  # [B, n + n(n-1)/2]
-        action = run_plan(self.plan(), x, None)  # the noise-free chain from a_T = 0, clipped to [-1, 1]
+        noise = None  # the noise-free chain from a_T = 0
+        if self.observation_noise:  # the observation's own chain noise, as predict draws it
+            noise = noise_from_projection(obs.float(), self.noise_projection, self.noise_offset, self.n_diffusion_steps)
+        action = run_plan(self.plan(), x, noise)  # clipped to [-1, 1]
         # SB3's unscale_action: [-1, 1] -> [low, high]
         return self.action_low + 0.5 * (action + 1.0) * (self.action_high - self.action_low)
 
@@ -168,8 +179,8 @@ def check_exportable(policy: Any) -> None:
     if policy.n_action_samples > 1:
         raise PolicyExportError(
             f"Cannot export a policy with n_action_samples={policy.n_action_samples}: its deterministic predict ranks "
-            "candidates drawn from a seeded generator whose noise depends on the batch size, which no static graph "
-            "reproduces. Set model.policy.n_action_samples = 1 to export the noise-free chain (a different policy)."
+            "candidates by the critic, which the exported graph does not hold. Set model.policy.n_action_samples = 1 to "
+            "export the one-sample rule (a different policy)."
         )
     action_space = policy.action_space
     assert isinstance(action_space, spaces.Box)

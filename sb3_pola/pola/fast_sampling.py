@@ -195,14 +195,14 @@ def sample_no_grad(
         if noise is None:
             noise = chain_noise(actor, features, generator, deterministic)
         if features.shape[0] <= INFERENCE_CHUNK:
-            return _run_plan(plan, features, noise)
+            return run_plan(plan, features, noise)
         # rows are independent: chunks keep every temporary in cache
         chunks = features.split(INFERENCE_CHUNK)
         noises = [None] * len(chunks) if noise is None else noise.split(INFERENCE_CHUNK, dim=1)
-        return th.cat([_run_plan(plan, f, z) for f, z in zip(chunks, noises, strict=True)])
+        return th.cat([run_plan(plan, f, z) for f, z in zip(chunks, noises, strict=True)])
 
 
-def _run_plan(plan: InferencePlan, features: th.Tensor, noise: th.Tensor | None) -> th.Tensor:
+def run_plan(plan: InferencePlan, features: th.Tensor, noise: th.Tensor | None) -> th.Tensor:
     """The reverse chain from ``plan``'s weights: ``noise`` ``[n + 1, B, A]`` (``a_T`` last), ``None`` from ``a_T = 0``."""
     state_proj = th.addmm(plan.b_in, features, plan.w_state_t)  # [B, H]
     step_bias = state_proj.unsqueeze(0) + plan.time_proj.unsqueeze(1)  # [n, B, H]
@@ -231,5 +231,6 @@ __all__ = [
     "inference_mish",
     "inference_plan",
     "sample_chain",
+    "run_plan",
     "sample_no_grad",
 ]

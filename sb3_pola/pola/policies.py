@@ -138,7 +138,9 @@ def observation_noise_projection(obs_dim: int, n_steps: int, action_dim: int, se
 def noise_from_projection(obs: th.Tensor, projection: th.Tensor, offset: th.Tensor, n_steps: int) -> th.Tensor:
     """:func:`observation_noise` from a given projection: uniforms from a sine hash, then Box-Muller."""
     key = obs.to(th.float64) @ projection + offset  # [B, 2D]
-    hashed = th.sin(key).abs() * 43758.5453123
+    # the classic sine hash; its constant is exact in float32, as an exporter may store a scalar in float32 and
+    # the hash magnifies any difference
+    hashed = th.sin(key).abs() * 43758.5
     uniform = (hashed - th.floor(hashed)).clamp(1e-12, 1.0 - 1e-12)  # [B, 2D] in (0, 1)
     n_draws = uniform.shape[-1] // 2
     u1, u2 = uniform[:, :n_draws], uniform[:, n_draws:]
