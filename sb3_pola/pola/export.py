@@ -65,6 +65,8 @@ class DeterministicPolicyGraph(nn.Module):
     step_bias: th.Tensor
     action_low: th.Tensor
     action_high: th.Tensor
+    noise_projection: th.Tensor
+    noise_offset: th.Tensor
 
     def __init__(self, policy: POLAPolicy) -> None:
         super().__init__()

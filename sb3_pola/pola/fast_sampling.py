@@ -230,7 +230,7 @@ __all__ = [
     "cached_view_plan",
     "inference_mish",
     "inference_plan",
-    "sample_chain",
     "run_plan",
+    "sample_chain",
     "sample_no_grad",
 ]

@@ -424,7 +424,7 @@ class POLAPolicy(BasePolicy):
         every state and batch size: candidate 0 is the noise-free chain (zeros), the others drawn with
         ``predict_seed``. The best of them by the pessimistic critic is the action, so on unimodal data the choice
         can stay at the noise-free action, and on mixed data it moves to a mode instead of the modes' mean."""
-        device = self.critic_target.q_net[0].weight.device
+        device = self.device
         generator = th.Generator(device="cpu").manual_seed(self.predict_seed)
         shape = (actor.n_diffusion_steps + 1, self.n_action_samples, actor.action_dim)
         noise = th.randn(shape, generator=generator)
