@@ -209,6 +209,7 @@ def test_deterministic_sample_is_the_noise_free_chain(pendulum_path):
         # and the fast forms of the chain, which predict and training run, give the same numbers
         assert th.allclose(sample_no_grad(actor, features, deterministic=True), expected, atol=1e-5)
     assert th.allclose(sample_chain(actor, features, deterministic=True).detach(), expected, atol=1e-5)
-    # predict(deterministic=True) is that action, rescaled to the env's bounds
+    # predict(deterministic=True) under deterministic_rule="noise_free" is that action, rescaled to the env's bounds
+    model.policy.deterministic_rule = "noise_free"
     action, _ = model.predict(obs.numpy(), deterministic=True)
     assert np.allclose(action, model.policy.unscale_action(expected.numpy()), atol=1e-4)

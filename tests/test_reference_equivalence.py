@@ -21,6 +21,7 @@ from sb3_pola.common.activations import FusedMish, compiled_mish, mish_exp
 from sb3_pola.common.datasets import synthetic_dataset
 from sb3_pola.pola import fast_sampling
 from sb3_pola.pola.fast_sampling import inference_mish, sample_chain, sample_no_grad
+from sb3_pola.pola.policies import observation_noise
 
 RTOL, ATOL = 1e-4, 1e-5
 
@@ -289,10 +290,15 @@ def test_predict_is_fresh_after_every_weight_write(write):
     write(model)
     with th.no_grad():
         after = policy._predict(obs, deterministic=True)
-        want = policy.actor_ema.sample(policy.actor_features(obs), deterministic=True)
+        # the default deterministic rule: the chain with the observation's own noise
+        noise = observation_noise(obs, policy.actor_ema.n_diffusion_steps, policy.actor_ema.action_dim, policy.predict_seed)
+        want = policy.actor_ema.sample(policy.actor_features(obs), noise=noise)
     assert not th.allclose(before, want), "the write did not change the policy: the test would prove nothing"
     _close(after, want)
-    _close(sample_no_grad(policy.actor_ema, policy.actor_features(obs), deterministic=True), want)
+    _close(sample_no_grad(policy.actor_ema, policy.actor_features(obs), noise=noise), want)
+    with th.no_grad():
+        noise_free = policy.actor_ema.sample(policy.actor_features(obs), deterministic=True)
+    _close(sample_no_grad(policy.actor_ema, policy.actor_features(obs), deterministic=True), noise_free)
 
 
 def test_predict_uses_one_cached_plan_until_a_write():

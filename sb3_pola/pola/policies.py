@@ -99,7 +99,13 @@ class DiffusionActor(nn.Module):
         target = actions if self.prediction_type == "sample" else noise
         return F.mse_loss(self.predict_noise(x_t, t, features), target)
 
-    def sample(self, features: th.Tensor, generator: th.Generator | None = None, deterministic: bool = False) -> th.Tensor:
+    def sample(
+        self,
+        features: th.Tensor,
+        generator: th.Generator | None = None,
+        deterministic: bool = False,
+        noise: th.Tensor | None = None,
+    ) -> th.Tensor:
         """Draw actions with the reverse chain (eq. 5), differentiable w.r.t. the parameters and ``features``.
 
         :param features: ``[B, F]`` state features
@@ -107,11 +113,13 @@ class DiffusionActor(nn.Module):
         :param deterministic: the noise-free chain: start from ``a_T = 0`` and follow the posterior means.
             A fixed noise draw would be deterministic too, but it biases every action the same way
             (on InvertedPendulum it dropped a policy's return from 1000 to 58); the mean path does not.
+        :param noise: ``[n + 1, B, A]`` the chain's noise (``a_T`` last), given instead of drawn
         :return: ``[B, A]`` actions in ``[-1, 1]``
         """
         batch_size = features.shape[0]
         shape = (self.n_diffusion_steps + 1, batch_size, self.action_dim)
-        noise = None if deterministic else th.randn(shape, device=features.device, dtype=features.dtype, generator=generator)
+        if noise is None and not deterministic:
+            noise = th.randn(shape, device=features.device, dtype=features.dtype, generator=generator)
         # a_T ~ N(0, I) (0 for the deterministic chain)
         x = th.zeros(shape[1:], device=features.device, dtype=features.dtype) if noise is None else noise[-1]
         for t in reversed(range(self.n_diffusion_steps)):
