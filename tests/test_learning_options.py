@@ -286,7 +286,9 @@ def test_floor_and_weights_against_the_paper_form(pendulum_path):
 
 # ---------------------------------------------------------------- the defaults chosen by issue #12's measurements
 def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_path):
-    """The four departures of 2026-12-02 (docs/results.md); ``**PAPER_FORM`` restores the paper's form."""
+    """The departures of issues #12 and #23 (docs/results.md); ``**PAPER_FORM`` restores the paper's form."""
+    from sb3_pola.common.schedules import CosineSchedule
+
     default = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs())
     paper = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(**PAPER_FORM))
     assert PAPER_FORM == {
@@ -294,24 +296,35 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "q_scale_floor": None,
         "critic_diversity": 0.0,
         "backprop_through_model": True,
+        "prediction_type": "epsilon",
+        "learning_rate": 3e-4,
     }
     for key, paper_value in PAPER_FORM.items():
         assert getattr(paper, key) == paper_value
         assert getattr(default, key) != paper_value, key
     assert (default.lookahead_normalization, default.q_scale_floor) == ("weights", "auto")
     assert (default.critic_diversity, default.backprop_through_model) == (1.0, False)
+    assert default.prediction_type == "sample" and default.actor.prediction_type == "sample"
+    assert paper.actor.prediction_type == "epsilon"
+    assert isinstance(default.learning_rate, CosineSchedule) and default.learning_rate(1.0) == pytest.approx(1e-3)
+    assert default.policy.deterministic_rule == "observation_noise"
+    assert default.policy.dynamics is not None and default.policy.dynamics.mean_loss == "beta_nll"
     # in the update: the similarity term is on by default, off in the paper's form
     for model, on in ((default, True), (paper, False)):
         model.learn(1)
         assert ("critic_similarity" in model._update(model.replay_buffer.sample(32))) == on
 
 
-def test_main_job_keeps_the_papers_form():
-    """The shipped InvertedPendulum main job needs the paper's strong, early Q term (docs/results.md)."""
+def test_main_job_keeps_the_defaults_but_the_q_terms_strength():
+    """The shipped InvertedPendulum main job needs a strong, early Q term (docs/results.md): the light configuration
+    is the package defaults with STRONG_Q_TERM; the paper configuration is the paper's form."""
     from sb3_pola.cli.run import CONFIGS
+    from sb3_pola.pola.pola import STRONG_Q_TERM
 
-    for config in CONFIGS.values():
-        assert {key: config[key] for key in PAPER_FORM} == PAPER_FORM
+    light, paper = CONFIGS["light"], CONFIGS["paper"]
+    assert {key: light[key] for key in STRONG_Q_TERM} == STRONG_Q_TERM
+    assert not set(PAPER_FORM) - set(STRONG_Q_TERM) & set(light), "the light job departs from the defaults"
+    assert {key: paper[key] for key in PAPER_FORM} == PAPER_FORM
 
 
 @pytest.mark.parametrize("compile_activations", [False, True])

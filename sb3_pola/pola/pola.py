@@ -21,6 +21,7 @@ from sb3_pola.common.compile import CompiledLoss
 from sb3_pola.common.datasets import DatasetLocation, OfflineDataset
 from sb3_pola.common.dynamics_trainer import DynamicsTrainer
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
+from sb3_pola.common.schedules import cosine_schedule
 from sb3_pola.common.termination import TerminationFn, get_termination_fn
 from sb3_pola.pola.export import export_policy
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
@@ -37,15 +38,22 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
+DEFAULT_LEARNING_RATE = cosine_schedule(1e-3)  # Diffusion-QL's cosine decay; the imitation screens of #23
 GRADIENT_RATIO_FREQ = 100  # gradient steps between two measurements of train/q_bc_grad_ratio
-# the paper's form of the Q term and critic (eq. 3/4 as written, Diffusion-QL's divisor, no ensemble-similarity
-# term, the actor's gradient through the model): POLA(..., **PAPER_FORM); four defaults depart from it (docstring)
+# the paper's form (eq. 3/4 as written, Diffusion-QL's divisor, no ensemble-similarity term, the actor's gradient
+# through the model, the DDPM noise target of eq. 6, a constant learning rate): POLA(..., **PAPER_FORM); the defaults
+# depart from it (docstring)
 PAPER_FORM: dict[str, Any] = {
     "lookahead_normalization": "first",
     "q_scale_floor": None,
     "critic_diversity": 0.0,
     "backprop_through_model": True,
+    "prediction_type": "epsilon",
+    "learning_rate": 3e-4,
 }
+# the Q term at the paper's strength (eq. 3/4 as written, no floor) with the defaults' critic and actor: what the
+# InvertedPendulum main job needs (docs/results.md, "The main job")
+STRONG_Q_TERM: dict[str, Any] = {"lookahead_normalization": "first", "q_scale_floor": None}
 
 
 def lookahead_weights(gamma_powers: th.Tensor, normalization: str) -> th.Tensor:
@@ -227,7 +235,7 @@ class POLA(OfflineAlgorithm):
         policy: str | type[POLAPolicy],
         env: GymEnv | str | None = None,
         dataset: DatasetLocation | OfflineDataset | None = None,
-        learning_rate: float | Schedule = 3e-4,
+        learning_rate: float | Schedule = DEFAULT_LEARNING_RATE,
         batch_size: int = 256,
         tau: float = 0.005,
         gamma: float = 0.99,
@@ -245,7 +253,7 @@ class POLA(OfflineAlgorithm):
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
-        prediction_type: str = "epsilon",
+        prediction_type: str = "sample",
         use_state_products: bool = True,
         max_grad_norm: float | None = 1.0,
         ema_decay: float = 0.995,
