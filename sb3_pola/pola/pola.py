@@ -51,9 +51,6 @@ PAPER_FORM: dict[str, Any] = {
     "prediction_type": "epsilon",
     "learning_rate": 3e-4,
 }
-# the Q term at the paper's strength (eq. 3/4 as written, no floor) with the defaults' critic and actor: what the
-# InvertedPendulum main job needs (docs/results.md, "The main job")
-STRONG_Q_TERM: dict[str, Any] = {"lookahead_normalization": "first", "q_scale_floor": None}
 
 
 def lookahead_weights(gamma_powers: th.Tensor, normalization: str) -> th.Tensor:
