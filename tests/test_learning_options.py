@@ -324,6 +324,8 @@ def test_main_job_keeps_the_papers_form():
             key: value for key, value in PAPER_FORM.items() if key != "learning_rate"
         }
     assert CONFIGS["light"]["learning_rate"] == 1e-3  # the light job's own, as measured
+    # the pole needs the chain's mean: the light job evaluates with the noise-free rule
+    assert CONFIGS["light"]["policy_kwargs"]["deterministic_rule"] == "noise_free"
 
 
 @pytest.mark.parametrize("compile_activations", [False, True])

@@ -120,7 +120,8 @@ class Config:
         changed = {key: value for key, value in pola_defaults(PAPER_FORM).items() if value != PAPER_FORM[key]}
         if changed:
             data["pola_defaults"] = changed
-        return hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
+        # repr: a schedule default (the cosine learning rate) is not JSON; its repr names its parameters
+        return hashlib.sha1(json.dumps(data, sort_keys=True, default=repr).encode()).hexdigest()[:10]
 
 
 def pola_defaults(keys: Any) -> dict[str, Any]:

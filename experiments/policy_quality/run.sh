@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Issue #23's screens (docs/results.md, "The policy's quality, issue #23"). One seed each unless SEEDS says otherwise.
+# Needs MINARI_DATASETS_PATH with halfcheetah/medium-v0, halfcheetah/medium-replay-v0 and pointmaze/medium-v0
+# (the U-maze and InvertedPendulum are shipped). Writes to outputs/policy_quality (OUT= to choose); re-running
+# evaluates the saved models instead of training again.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+PY="${PYTHON:-python}"
+OUT="${OUT:-outputs/policy_quality}"
+SEEDS="${SEEDS:-0}"
+mkdir -p "$OUT"
+ACTOR='"prediction_type": "sample", "lr_cos": 0.001'
+# the imitation screen: held-out action MSE
+for d in halfcheetah/medium-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
+  "$PY" experiments/policy_quality/bc_screen.py --dataset "$d" >> "$OUT/bc_screen.jsonl"
+done
+for s in $SEEDS; do
+  for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
+    # BC with the new actor, and the defaults (F1)
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name BC \
+      --kwargs "{$ACTOR, \"eta\": 0.0, \"rollout_length\": 0}"
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name F1 --kwargs "{$ACTOR}"
+  done
+  # the paper's Q strength with the new actor (P1), and with a lower confidence bound
+  P1="$ACTOR, \"lookahead_normalization\": \"first\", \"q_scale_floor\": null"
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed "$s" --name P1 --kwargs "{$P1}"
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed "$s" --name P1-lcb2 \
+    --kwargs "{$P1, \"lcb_coef\": 2.0}"
+  # the main job (the paper's form), and the defaults' actor with the paper's Q strength
+  "$PY" -m sb3_pola.cli run --seed "$s" --steps 6000 --out "$OUT/mainjob/s$s"
+  "$PY" -m sb3_pola.cli run --seed "$s" --steps 6000 --out "$OUT/mainjob_x0/s$s" \
+    --extra '{"lookahead_normalization": "first", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false}'
+done
+# the dynamics fit under the three mean losses
+"$PY" -m sb3_pola.cli model-check --dataset invertedpendulum/medium-v0 --max-steps 4000 --out "$OUT/model_check_ip.json"
+# speed: the defaults beside the paper's form
+"$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" > "$OUT/bench_defaults_vs_paper.json"
