@@ -108,7 +108,8 @@ def reference_step(model, policy, batch) -> dict[str, object]:
     t = th.randint(0, actor.n_diffusion_steps, (actions.shape[0],))
     noise = th.randn_like(actions)
     x_t = actor.schedule.sqrt_alphas_cumprod[t, None] * actions + actor.schedule.sqrt_one_minus_alphas_cumprod[t, None] * noise
-    bc_loss = ((actor.predict_noise(x_t, t, features) - noise) ** 2).mean()
+    target = actions if actor.prediction_type == "sample" else noise  # the clean action (the default) or the noise
+    bc_loss = ((actor.predict_noise(x_t, t, features) - target) ** 2).mean()
     # L_q (eq. 3, 4): gamma^i-weighted top-K pessimistic Q along the model rollout, masked after termination
     state, action = obs, ref_sample(actor, features)
     alive = th.ones(obs.shape[0])
@@ -116,7 +117,11 @@ def reference_step(model, policy, batch) -> dict[str, object]:
     dyn = policy.dynamics
     for i in range(model.rollout_length + 1):
         q_i = ref_q(critic, state, action, detach=True)
-        q_k = q_i.sort(dim=0).values[: model.top_k].mean(dim=0)
+        if model.lcb_coef is None:
+            q_k = q_i.sort(dim=0).values[: model.top_k].mean(dim=0)
+        else:  # the lower confidence bound, written out: mean - k * unbiased std over the members
+            mean = q_i.mean(dim=0)
+            q_k = mean - model.lcb_coef * ((q_i - mean).pow(2).sum(dim=0) / (q_i.shape[0] - 1)).sqrt()
         terms.append((q_k, alive))
         if i == model.rollout_length:
             break
@@ -177,6 +182,9 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         {"lookahead_uncertainty_cutoff": 0.215, "lookahead_uncertainty_penalty": 0.3},
         {"critic_diversity": 0.8},
         {"critic_diversity": 0.6, "critic_diversity_inputs": "states_and_actions", "rollout_length": 1},
+        # issue #23: the paper's noise target, and the lower confidence bound
+        {"prediction_type": "epsilon"},
+        {"lcb_coef": 1.5},
     ],
 )
 def test_update_matches_reference(kwargs):
