@@ -137,21 +137,22 @@ class POLA(OfflineAlgorithm):
     MuJoCo rule for the env, or the model's learned termination head when the env is unknown)
     marks terminal contribute no Q term, and neither do any states after them.
 
-    Four defaults depart from the paper, chosen by the measurements of ``docs/results.md`` (issue #12; CPU preset,
-    10,000 steps, 3 seeds): ``lookahead_normalization="weights"`` and ``q_scale_floor="auto"`` (a Q term whose
-    weight does not grow with ``T`` and stays weak while the critic is immature), ``critic_diversity=1`` (EDAC's
-    term: the paper's ensemble agreed so closely, action-gradient similarity 4.7 of 5, that its minimum was no
-    pessimism) and ``backprop_through_model=False`` (the actor steered the model into states the critic
-    overvalued). With the paper's form T = 3 collapsed on a Hopper-v5 medium dataset on every seed (1.8 against
-    38 for behaviour cloning) and was the worst variant on HalfCheetah; with these defaults it did not collapse on
-    Hopper and reached behaviour cloning's level on HalfCheetah medium. The paper's form is
-    ``POLA(..., **PAPER_FORM)``: on the shipped InvertedPendulum data, where the Q term has to pull hard and
-    early, it is what lifts the actor to the task's maximum within 6,000 steps (the main job uses it).
+    Six defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
+    ``lookahead_normalization="weights"`` and ``q_scale_floor="auto"`` (a Q term whose weight does not grow with
+    ``T`` and stays weak while the critic is immature: at the paper's strength it collapsed the locomotion actors
+    within a CPU budget), ``critic_diversity=1`` (EDAC's term: without it the ensemble agreed so closely that its
+    minimum was no pessimism), ``backprop_through_model=False`` (the actor steered the model into states the critic
+    overvalued), ``prediction_type="sample"`` (the actor regresses the clean action: it imitates as well as a plain
+    MSE regressor, the noise target did not) and a cosine learning rate from 1e-3. The dynamics model fits with
+    beta-NLL and ``predict(deterministic=True)`` draws one sample with the observation's own noise
+    (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``; the shipped
+    InvertedPendulum main job needs it (its Q term must pull hard and early), which the defaults do not give.
 
     :param policy: policy class or alias (``"MlpPolicy"``)
     :param env: env (or id) for evaluation callbacks; made from the dataset's metadata if ``None``
     :param dataset: Minari dataset id, path to a Minari dataset folder, or ``minari.MinariDataset``
-    :param learning_rate: learning rate of actor and critic (Adam), a float or a schedule
+    :param learning_rate: learning rate of actor and critic (Adam), a float or a schedule (default: a cosine decay
+        from 1e-3 to 0 over ``learn``, :func:`~sb3_pola.common.schedules.cosine_schedule`)
     :param batch_size: minibatch size
     :param tau: Polyak coefficient of the target critics
     :param gamma: discount factor, also the weight ``gamma^i`` of the ``i``-th look-ahead term (eq. 3)
