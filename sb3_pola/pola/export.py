@@ -27,8 +27,9 @@ from torch import nn
 
 from sb3_pola.common.activations import FusedMish, inference_mish
 from sb3_pola.common.torch_layers import StateProductsExtractor
+from sb3_pola.pola.actor import DiffusionActor, noise_from_projection, observation_noise_projection
 from sb3_pola.pola.fast_sampling import InferencePlan, inference_plan, run_plan
-from sb3_pola.pola.policies import DiffusionActor, POLAPolicy, noise_from_projection, observation_noise_projection
+from sb3_pola.pola.policies import POLAPolicy
 
 EXPORT_FORMATS = ("onnx", "torchscript")
 INPUT_NAME = "obs"

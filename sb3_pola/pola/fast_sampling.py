@@ -1,6 +1,6 @@
 """Fast forms of the diffusion actor's reverse chain (eq. 5), beside the readable :meth:`DiffusionActor.sample`.
 
-Both compute what :meth:`~sb3_pola.pola.policies.DiffusionActor.sample` computes (float rounding aside;
+Both compute what :meth:`~sb3_pola.pola.actor.DiffusionActor.sample` computes (float rounding aside;
 ``tests/test_reference_equivalence.py`` holds them to it), from the same parameters, with fewer operations:
 
 - :func:`sample_chain`, the training form: differentiable and traceable by ``torch.compile``. The first
@@ -30,8 +30,8 @@ from torch.nn import functional as F
 
 from sb3_pola.common.activations import inference_mish
 
-if TYPE_CHECKING:  # policies imports this module
-    from sb3_pola.pola.policies import DiffusionActor
+if TYPE_CHECKING:
+    from sb3_pola.pola.actor import DiffusionActor
 
 # rows per chunk of the no-grad chain: a chunk's [rows, width] float32 temporaries stay in cache and below
 # glibc's mmap threshold (larger ones are fresh mappings, which makes every elementwise op slower)
