@@ -284,6 +284,11 @@ def test_deterministic_predict_draws_the_observations_noise():
     assert th.allclose(action, expected, atol=1e-6)
     singles = th.cat([policy._predict(obs[i : i + 1], deterministic=True) for i in range(6)])
     assert th.allclose(singles, action, atol=1e-5)
+    # the cached projection follows predict_seed
+    policy.predict_seed = 1
+    reseeded = sample_no_grad(policy.actor_ema, feats, noise=observation_noise(obs, policy.actor_ema.n_diffusion_steps, 2, 1))
+    assert th.allclose(policy._predict(obs, deterministic=True), reseeded, atol=1e-6)
+    assert not th.allclose(reseeded, action)
     policy.deterministic_rule = "noise_free"
     assert th.allclose(policy._predict(obs, deterministic=True), sample_no_grad(policy.actor_ema, feats, deterministic=True))
     with pytest.raises(ValueError, match="deterministic_rule"):

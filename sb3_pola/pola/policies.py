@@ -17,7 +17,13 @@ from torch.nn import functional as F
 from sb3_pola.common.activations import fused_activation, twice_differentiable
 from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.torch_layers import StateProductsExtractor
-from sb3_pola.pola.actor import DETERMINISTIC_RULES, DiffusionActor, observation_noise
+from sb3_pola.pola.actor import (
+    DETERMINISTIC_RULES,
+    DiffusionActor,
+    noise_from_projection,
+    observation_noise,
+    observation_noise_projection,
+)
 from sb3_pola.pola.critic import EnsembleCritic
 from sb3_pola.pola.fast_sampling import sample_no_grad
 
@@ -215,7 +221,8 @@ class POLAPolicy(BasePolicy):
         if n == 1:
             noise = None
             if deterministic and self.deterministic_rule == "observation_noise":
-                noise = observation_noise(obs, actor.n_diffusion_steps, actor.action_dim, self.predict_seed)
+                projection, offset = self._noise_projection(obs.device)
+                noise = noise_from_projection(obs, projection, offset, actor.n_diffusion_steps)
             return sample_no_grad(actor, self.actor_features(obs), deterministic=deterministic, noise=noise)
         batch_size = obs.shape[0]
         obs_rep = obs.repeat_interleave(n, dim=0)  # [B * n, obs]
@@ -231,6 +238,18 @@ class POLAPolicy(BasePolicy):
         else:
             idx = th.multinomial(F.softmax(q, dim=1), 1).squeeze(1)
         return actions.view(batch_size, n, -1)[th.arange(batch_size, device=obs.device), idx]
+
+    def _noise_projection(self, device: th.device) -> tuple[th.Tensor, th.Tensor]:
+        """:func:`~sb3_pola.pola.actor.observation_noise_projection` of this policy, drawn once per seed and device
+        (predict is a hot path; the projection depends only on the sizes and ``predict_seed``)."""
+        key = (self.predict_seed, device)
+        if getattr(self, "_projection_cache", (None,))[0] != key:
+            obs_dim = int(np.prod(self.observation_space.shape))  # type: ignore[arg-type]
+            projection, offset = observation_noise_projection(
+                obs_dim, self.actor.n_diffusion_steps, self.actor.action_dim, self.predict_seed
+            )
+            self._projection_cache = (key, projection.to(device), offset.to(device))
+        return self._projection_cache[1], self._projection_cache[2]
 
     def candidate_noise(self, actor: DiffusionActor) -> th.Tensor:
         """``[steps + 1, n, A]``: the chain noise of the ``n`` candidates of a deterministic ``predict``, the same for
