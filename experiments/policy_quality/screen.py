@@ -23,6 +23,7 @@ import torch as th
 
 from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset, make_env
+from sb3_pola.common.evaluation import evaluate
 from sb3_pola.common.schedules import cosine_schedule
 
 # the cpu preset's sizes (sb3-pola score --preset cpu), eager
@@ -40,27 +41,6 @@ RULES = {
     "sample": (1, False, "noise_free"),
     "best10": (10, True, "noise_free"),
 }
-
-
-def episodes(model: POLA, env: Any, n: int, seed: int, deterministic: bool) -> tuple[np.ndarray, list[bool | None]]:
-    """Returns and successes of ``n`` episodes, reset with seeds ``seed + i`` (the score protocol's)."""
-    from sb3_pola.common.metrics import update_success
-
-    returns, successes = [], []
-    with th.random.fork_rng():
-        th.manual_seed(seed)
-        for i in range(n):
-            obs, _ = env.reset(seed=seed + i)
-            done, total, success = False, 0.0, None
-            while not done:
-                action, _ = model.predict(obs, deterministic=deterministic)
-                obs, reward, terminated, truncated, info = env.step(action)
-                total += float(reward)
-                done = terminated or truncated
-                success = update_success(success, info)
-            returns.append(total)
-            successes.append(success)
-    return np.array(returns), successes
 
 
 def main() -> None:
@@ -102,7 +82,8 @@ def main() -> None:
     row["train_s"] = round(time.time() - start)
     for rule in args.rules.split(","):
         model.policy.n_action_samples, deterministic, model.policy.deterministic_rule = RULES[rule]
-        returns, successes = episodes(model, env, args.episodes, 10_000 * (args.seed + 1), deterministic)
+        successes: list[bool | None] = []
+        returns = evaluate(model, env, args.episodes, 10_000 * (args.seed + 1), deterministic, successes)
         score = data.normalized_score(returns)
         row[rule] = round(score if score is not None else float(returns.mean()), 1)
         if successes and successes[0] is not None:
