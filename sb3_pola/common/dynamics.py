@@ -31,6 +31,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from sb3_pola.common.torch_layers import VectorizedLinear, vectorized_mlp
+from sb3_pola.common.validation import check_choice, check_float, check_int, check_keys
 
 # Per-layer L2 coefficients of the reference recipe (4 hidden layers + output layer).
 DEFAULT_WEIGHT_DECAYS = (2.5e-5, 5e-5, 7.5e-5, 7.5e-5, 1e-4)
@@ -50,6 +51,34 @@ def default_weight_decays(n_layers: int) -> tuple[float, ...]:
 
 
 MEAN_LOSSES = ("nll", "beta_nll", "mse")
+# the arguments of EnsembleDynamics a user sets (obs_dim and action_dim come from the data)
+DYNAMICS_KWARGS = (
+    "n_members",
+    "n_elites",
+    "hidden_dim",
+    "n_layers",
+    "learn_termination",
+    "weight_decays",
+    "mean_loss",
+    "beta",
+)
+
+
+def check_dynamics_kwargs(kwargs: dict, name: str = "dynamics_kwargs") -> None:
+    """Check the user's arguments of :class:`EnsembleDynamics` (before anything is built), naming them as
+    ``dynamics_kwargs['n_members']``.
+
+    :param kwargs: the arguments
+    :param name: the name of the dict in the messages
+    :raises ~sb3_pola.common.errors.HyperparameterError: an unknown key or a value out of range
+    """
+    check_keys(name, kwargs, DYNAMICS_KWARGS)
+    n_members = check_int(f"{name}['n_members']", kwargs.get("n_members", 7), low=1)
+    check_int(f"{name}['n_elites']", kwargs.get("n_elites", 5), low=1, high=n_members)
+    check_int(f"{name}['hidden_dim']", kwargs.get("hidden_dim", 200), low=1)
+    check_int(f"{name}['n_layers']", kwargs.get("n_layers", 4), low=1)
+    check_choice(f"{name}['mean_loss']", kwargs.get("mean_loss", "beta_nll"), MEAN_LOSSES)
+    check_float(f"{name}['beta']", kwargs.get("beta", 0.5), low=0.0, high=1.0)
 
 
 @dataclass(frozen=True)

@@ -21,10 +21,50 @@ import torch as th
 import torch.nn.functional as F
 
 from sb3_pola.common.dynamics import EnsembleDynamics, NormalizationStats
+from sb3_pola.common.validation import check_float, check_int, check_keys
 
 if TYPE_CHECKING:
     from stable_baselines3.common.logger import Logger
     from tqdm import tqdm
+
+
+# the arguments of DynamicsTrainer a user sets through POLA's dynamics_fit_kwargs
+FIT_KWARGS = (
+    "batch_size",
+    "learning_rate",
+    "holdout_ratio",
+    "max_holdout",
+    "max_epochs",
+    "max_steps",
+    "patience",
+    "max_epoch_steps",
+    "progress_bar",
+    "logger",
+    "verbose",
+)
+
+
+def check_fit_kwargs(kwargs: dict, name: str = "dynamics_fit_kwargs") -> None:
+    """Check arguments of :class:`DynamicsTrainer`, naming them as ``dynamics_fit_kwargs['patience']``.
+
+    :param kwargs: the arguments
+    :param name: the name of the dict in the messages (``""``: the bare argument names)
+    :raises ~sb3_pola.common.errors.HyperparameterError: an unknown key or a value out of range
+    """
+
+    def key(arg: str) -> str:
+        return f"{name}[{arg!r}]" if name else arg
+
+    if name:
+        check_keys(name, kwargs, FIT_KWARGS)
+    check_int(key("batch_size"), kwargs.get("batch_size", 1), low=1)
+    check_float(key("learning_rate"), kwargs.get("learning_rate", 1e-3), low=0.0, low_open=True)
+    check_float(key("holdout_ratio"), kwargs.get("holdout_ratio", 0.2), low=0.0, high=1.0, high_open=True)
+    check_int(key("max_holdout"), kwargs.get("max_holdout", 1), low=1)
+    check_int(key("max_epochs"), kwargs.get("max_epochs"), low=1, optional=True)
+    check_int(key("max_steps"), kwargs.get("max_steps"), low=1, optional=True)
+    check_int(key("patience"), kwargs.get("patience", 1), low=1)
+    check_int(key("max_epoch_steps"), kwargs.get("max_epoch_steps"), low=1, optional=True)
 
 
 @dataclass(frozen=True)
@@ -372,6 +412,19 @@ class DynamicsTrainer:
         logger: Logger | None = None,
         verbose: int = 0,
     ) -> None:
+        check_fit_kwargs(
+            dict(
+                batch_size=batch_size,
+                learning_rate=learning_rate,
+                holdout_ratio=holdout_ratio,
+                max_holdout=max_holdout,
+                max_epochs=max_epochs,
+                max_steps=max_steps,
+                patience=patience,
+                max_epoch_steps=max_epoch_steps,
+            ),
+            name="",
+        )
         self.model = model
         self.batch_size = batch_size
         self.holdout_ratio = holdout_ratio

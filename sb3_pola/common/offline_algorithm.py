@@ -27,6 +27,7 @@ from sb3_pola.common.datasets import DatasetLocation, OfflineDataset, load_offli
 from sb3_pola.common.dict_obs import flatten_env, flatten_observation
 from sb3_pola.common.integrity import DivergenceError, validate_model_file
 from sb3_pola.common.metrics import normalized_score
+from sb3_pola.common.validation import check_float, check_float_or_schedule, check_int
 
 SelfOfflineAlgorithm = TypeVar("SelfOfflineAlgorithm", bound="OfflineAlgorithm")
 
@@ -101,8 +102,12 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
         supported_action_spaces: tuple[type[spaces.Space], ...] | None = (spaces.Box,),
         check_finite_freq: int = 100,
     ) -> None:
-        if check_finite_freq < 0:
-            raise ValueError(f"check_finite_freq must be >= 0, got {check_finite_freq}")
+        # checked before the dataset is loaded: a bad value fails at once, not in learn after the dynamics fit
+        check_float_or_schedule("learning_rate", learning_rate, low=0.0, low_open=True)
+        check_int("batch_size", batch_size, low=1)
+        check_float("tau", tau, low=0.0, high=1.0, low_open=True)
+        check_float("gamma", gamma, low=0.0, high=1.0, low_open=True)
+        check_int("check_finite_freq", check_finite_freq, low=0)
         data: OfflineDataset | None = None
         if isinstance(env, str):  # made here rather than by SB3, so that dict observations can be flattened
             env = gym.make(env)

@@ -19,10 +19,14 @@ from sb3_pola.common.activations import eager_activations
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.compile import CompiledLoss
 from sb3_pola.common.datasets import DatasetLocation, OfflineDataset
-from sb3_pola.common.dynamics_trainer import DynamicsTrainer
+from sb3_pola.common.diffusion import BETA_SCHEDULES, PREDICTION_TYPES
+from sb3_pola.common.dynamics import check_dynamics_kwargs
+from sb3_pola.common.dynamics_trainer import DynamicsTrainer, check_fit_kwargs
+from sb3_pola.common.errors import HyperparameterError
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.common.schedules import cosine_schedule
 from sb3_pola.common.termination import TerminationFn, get_termination_fn
+from sb3_pola.common.validation import check_choice, check_float, check_float_or_schedule, check_int
 from sb3_pola.pola.export import export_policy
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
 from sb3_pola.pola.losses import ensemble_similarity, lookahead_q_objective, lookahead_weights
@@ -52,6 +56,70 @@ PAPER_FORM: dict[str, Any] = {
     "prediction_type": "epsilon",
     "learning_rate": 3e-4,
 }
+
+
+# ------------------------------------------------------------------ argument checks (issue #25)
+def check_pola_arguments(
+    *,
+    n_critics: int,
+    top_k: int,
+    rollout_length: int,
+    eta: float | Schedule,
+    gamma: float,
+    lookahead_normalization: str,
+    q_scale_floor: float | str | None,
+    critic_diversity: float,
+    critic_diversity_inputs: str,
+    lookahead_uncertainty_penalty: float,
+    lookahead_uncertainty_cutoff: float | None,
+    lcb_coef: float | None,
+    n_diffusion_steps: int,
+    beta_schedule: str,
+    prediction_type: str,
+    max_grad_norm: float | None,
+    ema_decay: float,
+    ema_update_freq: int,
+    ema_start: int,
+    dynamics_kwargs: dict[str, Any] | None,
+    dynamics_fit_kwargs: dict[str, Any] | None,
+) -> None:
+    """Check POLA's own arguments before anything is loaded or built (the base class checks ``learning_rate``,
+    ``batch_size``, ``tau``, ``gamma``); each message names the public argument and its range.
+
+    :raises ~sb3_pola.common.errors.HyperparameterError: (a ``ValueError``) an argument out of its range
+    """
+    n_critics = check_int("n_critics", n_critics, low=1)  # type: ignore[assignment]
+    check_int("top_k", top_k, low=1, high=n_critics)
+    check_int("rollout_length", rollout_length, low=0)
+    check_float_or_schedule("eta", eta, low=0.0)
+    check_choice("lookahead_normalization", lookahead_normalization, LOOKAHEAD_NORMALIZATIONS)
+    if q_scale_floor is None or isinstance(q_scale_floor, str):
+        check_choice("q_scale_floor", q_scale_floor, (None, "auto"))
+    else:
+        check_float("q_scale_floor", q_scale_floor, low=0.0)
+    if q_scale_floor == "auto" and isinstance(gamma, float | int) and gamma == 1:
+        raise HyperparameterError(
+            "q_scale_floor='auto' needs gamma < 1 (the data's value scale is mean |r| / (1 - gamma)); "
+            "give q_scale_floor a number or None"
+        )
+    check_float("critic_diversity", critic_diversity, low=0.0)
+    check_choice("critic_diversity_inputs", critic_diversity_inputs, CRITIC_DIVERSITY_INPUTS)
+    if critic_diversity > 0 and n_critics < 2:
+        raise HyperparameterError(f"critic_diversity > 0 needs n_critics >= 2, got n_critics={n_critics}")
+    check_float("lookahead_uncertainty_penalty", lookahead_uncertainty_penalty, low=0.0)
+    check_float("lookahead_uncertainty_cutoff", lookahead_uncertainty_cutoff, low=0.0, low_open=True, optional=True)
+    check_float("lcb_coef", lcb_coef, low=0.0, optional=True)
+    if lcb_coef is not None and n_critics < 2:
+        raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
+    check_int("n_diffusion_steps", n_diffusion_steps, low=1)
+    check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
+    check_choice("prediction_type", prediction_type, PREDICTION_TYPES)
+    check_float("max_grad_norm", max_grad_norm, low=0.0, low_open=True, optional=True)
+    check_float("ema_decay", ema_decay, low=0.0, high=1.0)
+    check_int("ema_update_freq", ema_update_freq, low=1)
+    check_int("ema_start", ema_start, low=0)
+    check_dynamics_kwargs(dynamics_kwargs or {})
+    check_fit_kwargs(dynamics_fit_kwargs or {})
 
 
 class POLA(OfflineAlgorithm):
@@ -213,6 +281,29 @@ class POLA(OfflineAlgorithm):
         check_finite_freq: int = 100,
         _init_setup_model: bool = True,
     ) -> None:
+        check_pola_arguments(
+            n_critics=n_critics,
+            top_k=top_k,
+            rollout_length=rollout_length,
+            eta=eta,
+            gamma=gamma,
+            lookahead_normalization=lookahead_normalization,
+            q_scale_floor=q_scale_floor,
+            critic_diversity=critic_diversity,
+            critic_diversity_inputs=critic_diversity_inputs,
+            lookahead_uncertainty_penalty=lookahead_uncertainty_penalty,
+            lookahead_uncertainty_cutoff=lookahead_uncertainty_cutoff,
+            lcb_coef=lcb_coef,
+            n_diffusion_steps=n_diffusion_steps,
+            beta_schedule=beta_schedule,
+            prediction_type=prediction_type,
+            max_grad_norm=max_grad_norm,
+            ema_decay=ema_decay,
+            ema_update_freq=ema_update_freq,
+            ema_start=ema_start,
+            dynamics_kwargs=dynamics_kwargs,
+            dynamics_fit_kwargs=dynamics_fit_kwargs,
+        )
         super().__init__(
             policy,
             env,
@@ -229,28 +320,6 @@ class POLA(OfflineAlgorithm):
             device=device,
             check_finite_freq=check_finite_freq,
         )
-        if not 1 <= top_k <= n_critics:
-            raise ValueError(f"top_k must be in [1, n_critics={n_critics}], got {top_k}")
-        if rollout_length < 0:
-            raise ValueError(f"rollout_length must be >= 0, got {rollout_length}")
-        if lookahead_normalization not in LOOKAHEAD_NORMALIZATIONS:
-            raise ValueError(
-                f"lookahead_normalization must be one of {LOOKAHEAD_NORMALIZATIONS}, got {lookahead_normalization!r}"
-            )
-        if isinstance(q_scale_floor, str) and q_scale_floor != "auto":
-            raise ValueError(f"q_scale_floor must be None, 'auto' or a float, got {q_scale_floor!r}")
-        if critic_diversity < 0:
-            raise ValueError(f"critic_diversity must be >= 0, got {critic_diversity}")
-        if critic_diversity_inputs not in CRITIC_DIVERSITY_INPUTS:
-            raise ValueError(
-                f"critic_diversity_inputs must be one of {CRITIC_DIVERSITY_INPUTS}, got {critic_diversity_inputs!r}"
-            )
-        if critic_diversity > 0 and n_critics < 2:
-            raise ValueError("critic_diversity needs n_critics >= 2")
-        if lcb_coef is not None and (lcb_coef < 0 or n_critics < 2):
-            raise ValueError(f"lcb_coef must be None or >= 0 with n_critics >= 2, got {lcb_coef} (n_critics={n_critics})")
-        if lookahead_uncertainty_penalty < 0:
-            raise ValueError(f"lookahead_uncertainty_penalty must be >= 0, got {lookahead_uncertainty_penalty}")
         self.n_critics = n_critics
         self.top_k = top_k
         self.rollout_length = rollout_length
