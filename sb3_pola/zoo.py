@@ -42,7 +42,14 @@ import gymnasium as gym
 from gymnasium.envs.registration import parse_env_id
 
 from sb3_pola.common.callbacks import NormalizedScoreEvalCallback
-from sb3_pola.common.datasets import D4RL_KINDS, DatasetError, list_local_datasets, make_env, resolve_dataset_path
+from sb3_pola.common.datasets import (
+    D4RL_KINDS,
+    DatasetError,
+    DatasetNotFoundError,
+    list_local_datasets,
+    make_env,
+    resolve_dataset_path,
+)
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.pola.pola import POLA
 
@@ -102,7 +109,7 @@ def make_dataset_env(dataset_id: str, fallback_env_id: str | None = None, **kwar
     """
     try:
         resolve_dataset_path(dataset_id)
-        return make_env(dataset_id, **kwargs)
+        return make_env(dataset_id, monitor=False, **kwargs)  # the zoo wraps its envs in a Monitor itself
     except DatasetError as error:
         if fallback_env_id is None:
             raise DatasetError(f"Cannot make the env of dataset {dataset_id!r}: {error}") from error
@@ -339,6 +346,23 @@ def zoo_arguments(command: str, args: list[str]) -> list[str]:
     return args
 
 
+def check_env_option(dataset_envs: dict[str, str], env_id: str | None) -> None:
+    """``--env`` names a dataset registered here or a Gymnasium env; else a one-line error, not rl-zoo3's guess.
+
+    :param dataset_envs: ``{env id: dataset id}`` of the registered dataset envs
+    :param env_id: the ``--env`` given (``None``: the zoo's default)
+    :raises ~sb3_pola.common.datasets.DatasetNotFoundError: neither
+    """
+    if env_id is None or env_id in gym.registry:
+        return
+    local = sorted(env for env, dataset in dataset_envs.items() if dataset in set(list_local_datasets()))
+    raise DatasetNotFoundError(
+        f"--env {env_id!r} is neither a local dataset nor a Gymnasium env. Local datasets as --env: "
+        f"{', '.join(local) if local else 'none'} (`sb3-pola datasets` lists them; a Minari id's '/' but the last "
+        "become '-'). Get one with `minari download <id>` or `sb3-pola collect`."
+    )
+
+
 def usage() -> str:
     return (
         "usage: sb3-pola {train,enjoy,optimize} [rl-zoo3 arguments]\n\n"
@@ -370,7 +394,7 @@ def main(argv: list[str] | None = None) -> int:
 
     register_pola()
     args = zoo_arguments(command, rest)
-    register_dataset_envs(config=_option(args, "-conf", "--conf-file"))
+    check_env_option(register_dataset_envs(config=_option(args, "-conf", "--conf-file")), _option(args, "--env"))
     entry = rl_zoo3.enjoy.enjoy if command == "enjoy" else rl_zoo3.train.train
     with _patched(sys, "argv", [f"sb3-pola {command}", *args]), _patched(rl_zoo3.train, "ExperimentManager", _manager_class()):
         try:

@@ -1,15 +1,21 @@
 """``sb3-pola`` command line: one sub-command per tool, each in a module of its own.
 
-Commands that need an optional extra (``setup.py``'s ``extras_require``) say which one when its modules are
-missing, instead of a traceback: :mod:`sb3_pola.common.extras` is the one place that knows this, and :func:`main`
-prints :func:`~sb3_pola.common.extras.missing_extra_message` and exits with status 2.
+:func:`main` is the one place that turns the user's errors into one line on stderr and exit status 2, without a
+traceback (``--debug`` or ``SB3_POLA_DEBUG=1`` prints it too): the package's
+:class:`~sb3_pola.common.errors.UserError` (datasets not found or corrupt, model files, bad arguments and
+hyperparameters, export refusals) and missing extras. Commands that need an optional extra (``setup.py``'s
+``extras_require``) say which one: :mod:`sb3_pola.common.extras` is the one place that knows this.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
+import pathlib
 import sys
+import traceback
 
+from sb3_pola.common.errors import UserError
 from sb3_pola.common.extras import COMMAND_EXTRAS, install_hint, missing_extra, missing_extra_message
 
 # sub-command -> (module with a ``main(argv)``, one-line help)
@@ -28,12 +34,41 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+def version() -> str:
+    """The package's version, read without importing torch."""
+    return (pathlib.Path(__file__).resolve().parent.parent / "version.txt").read_text().strip()
+
+
+def debug_requested(argv: list[str]) -> bool:
+    """``--debug`` among the arguments or ``SB3_POLA_DEBUG`` set (not to 0): show tracebacks of user errors."""
+    return "--debug" in argv or os.environ.get("SB3_POLA_DEBUG", "0") not in ("", "0")
+
+
+def report(command: str, error: BaseException, debug: bool) -> int:
+    """Print a user error as one line (after its traceback with ``debug``).
+
+    :param command: the sub-command
+    :param error: the error
+    :param debug: print the traceback first
+    :return: exit status 2
+    """
+    if debug:
+        traceback.print_exception(error)
+    message = " ".join(str(error).split())  # one line, whatever the message holds
+    print(f"sb3-pola {command}: error: {message}" + ("" if debug else " (--debug shows the traceback)"), file=sys.stderr)
+    return 2
+
+
 def usage() -> str:
-    lines = ["usage: sb3-pola <command> [args]", "", "commands:"]
+    lines = ["usage: sb3-pola [--version] [--debug] <command> [args]", "", "commands:"]
     for name, (_, help_) in COMMANDS.items():
         extras = COMMAND_EXTRAS.get(name, ())
         lines.append(f"  {name:<11} {help_}" + (f" [extra: {', '.join(extras)}]" if extras else ""))
-    lines += ["", f"extras: {install_hint('<extra>')}; `sb3-pola <command> --help` for a command's options"]
+    lines += [
+        "",
+        f"extras: {install_hint('<extra>')}; `sb3-pola <command> --help` for a command's options",
+        "--debug (or SB3_POLA_DEBUG=1): show the traceback of an error, not only its one line",
+    ]
     return "\n".join(lines)
 
 
@@ -41,11 +76,16 @@ def main(argv: list[str] | None = None) -> int:
     """Dispatch ``argv`` to a sub-command's ``main``.
 
     :param argv: ``[command, *arguments]`` (default: ``sys.argv[1:]``)
-    :return: exit status (2 for an unknown command or a missing extra)
+    :return: exit status (2 for an unknown command, a user error or a missing extra)
     """
     argv = list(sys.argv[1:] if argv is None else argv)
+    debug = debug_requested(argv)
+    argv = [arg for arg in argv if arg != "--debug"]
     if not argv or argv[0] in ("-h", "--help"):
         print(usage())
+        return 0
+    if argv[0] in ("-V", "--version"):
+        print(f"sb3-pola {version()}")
         return 0
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
@@ -57,10 +97,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         module = importlib.import_module(module_name)
         result = module.main(rest)
+    except UserError as error:
+        return report(name, error, debug)
     except ImportError as error:  # also the commands' own errors raised from a ModuleNotFoundError
         extra = missing_extra(name, error)
         if extra is None:
             raise
+        if debug:
+            traceback.print_exception(error)
         print(missing_extra_message(name, extra, error), file=sys.stderr)
         return 2
     return int(result or 0)

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
-
+from sb3_pola.common.arguments import ArgumentParser
 from sb3_pola.common.datasets import _env_id, _scan, _search_roots, minari_datasets_dir, package_datasets_dir, read_metadata
 
 
 def main(argv: list[str] | None = None) -> int:
     """``sb3-pola datasets``: list local datasets (id, steps, episodes, env, reference scores)."""
-    parser = argparse.ArgumentParser(prog="sb3-pola datasets", description="List the Minari datasets found locally.")
+    parser = ArgumentParser(prog="sb3-pola datasets", description="List the Minari datasets found locally.")
     parser.parse_args(argv)
     rows = []
     seen = set()

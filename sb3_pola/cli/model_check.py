@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import pathlib
 import time
@@ -13,6 +12,7 @@ import numpy as np
 import torch as th
 
 from sb3_pola.cli.options import datasets_path
+from sb3_pola.common.arguments import ArgumentParser, int_at_least
 from sb3_pola.common.datasets import load_offline_dataset, make_env
 from sb3_pola.common.dynamics import EnsembleDynamics
 from sb3_pola.common.dynamics_trainer import DynamicsTrainer
@@ -26,14 +26,16 @@ def main(argv: list[str] | None = None) -> int:
     :param argv: command-line arguments (default ``sys.argv[1:]``)
     :return: the exit code
     """
-    parser = argparse.ArgumentParser(prog="sb3-pola model-check", description=model_check.__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog="sb3-pola model-check", description=model_check.__doc__.split("\n\n")[0])
     parser.add_argument("--dataset", required=True)
     parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
     parser.add_argument("--mean-loss", nargs="+", default=["nll", "beta_nll", "mse"])
     parser.add_argument("--dynamics-kwargs", default='{"n_members": 5, "n_elites": 3, "hidden_dim": 128, "n_layers": 3}')
-    parser.add_argument("--max-steps", type=int, default=2000, help="cap on the fit's gradient steps (the cpu preset's)")
-    parser.add_argument("--horizon", type=int, default=3)
-    parser.add_argument("--starts", type=int, default=500, help="held-out start states")
+    parser.add_argument(
+        "--max-steps", type=int_at_least(1), default=2000, help="cap on the fit's gradient steps (the cpu preset's)"
+    )
+    parser.add_argument("--horizon", type=int_at_least(1), default=3)
+    parser.add_argument("--starts", type=int_at_least(1), default=500, help="held-out start states")
     parser.add_argument("--policy", help="a saved POLA model whose actions drive the simulator rollouts")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", help="write the results as JSON here")

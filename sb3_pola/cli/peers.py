@@ -11,6 +11,7 @@ import sys
 from typing import Any
 
 from sb3_pola.cli.options import datasets_path
+from sb3_pola.common.arguments import ArgumentParser, int_at_least
 from sb3_pola.common.machine import machine_info
 from sb3_pola.grid import peers
 from sb3_pola.grid.report import write_reports
@@ -19,27 +20,24 @@ from sb3_pola.grid.variants import DEFAULT_DATASETS, DEFAULT_VARIANTS
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="sb3-pola peers",
         description="d3rlpy baselines (TD3+BC, IQL, BC) on the same datasets and evaluation protocol as sb3-pola score.",
     )
     parser.add_argument("--datasets", nargs="+", default=DEFAULT_DATASETS, help="Minari dataset ids")
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    parser.add_argument("--seeds", nargs="+", type=int_at_least(0), default=[0, 1, 2])
     parser.add_argument("--algos", nargs="+", default=peers.ALGOS, choices=peers.ALGOS)
-    parser.add_argument("--steps", type=int, default=10_000, help="gradient steps per run")
-    parser.add_argument("--eval-freq", type=int, default=2_000, help="gradient steps between evaluations")
-    parser.add_argument("--eval-episodes", type=int, default=10, help="episodes per evaluation")
+    parser.add_argument("--steps", type=int_at_least(1), default=10_000, help="gradient steps per run")
+    parser.add_argument("--eval-freq", type=int_at_least(1), default=2_000, help="gradient steps between evaluations")
+    parser.add_argument("--eval-episodes", type=int_at_least(1), default=10, help="episodes per evaluation")
     parser.add_argument("--data-dir", help="folder of the Minari datasets (sets MINARI_DATASETS_PATH)")
     parser.add_argument("--out", default="outputs/score", help="output folder (score's, so table.md shows both)")
-    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads of each run")
+    parser.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads of each run")
     parser.add_argument("--venv", default=peers.DEFAULT_VENV, help="virtual environment of d3rlpy (created if missing)")
     parser.add_argument("--python", default=sys.executable, help="Python that creates the venv")
     parser.add_argument("--dry-run", action="store_true", help="print the cells, run nothing")
     parser.add_argument("-v", "--verbose", type=int, default=1)
-    args = parser.parse_args(argv)
-    if args.steps < 1 or args.eval_freq < 1 or args.eval_episodes < 1 or args.threads < 1:
-        parser.error("--steps, --eval-freq, --eval-episodes and --threads must be positive")
-    return args
+    return parser.parse_args(argv)
 
 
 def budget(args: argparse.Namespace) -> dict[str, Any]:

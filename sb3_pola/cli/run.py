@@ -2,7 +2,7 @@
 
 Prints one table (dataset, gradient steps, wall time, steps/s, mean return, normalised score, the
 success rate where the env reports one (the mazes), the dataset's own average return) and writes
-``model.zip``, ``learning_curve.png`` and ``results.json`` into ``--out``.
+``model.zip``, ``learning_curve.png``, ``results.json`` and ``evaluations.npz`` into ``--out``.
 """
 
 from __future__ import annotations
@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from sb3_pola.common.arguments import ArgumentParser, int_at_least, json_object
+from sb3_pola.common.errors import UsageError
 from sb3_pola.common.metrics import success_rate, update_success
 from sb3_pola.pola.pola import PAPER_FORM
 
@@ -47,18 +49,17 @@ DEFAULT_DATASET = "invertedpendulum/medium-v0"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        prog="sb3-pola run", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    """The arguments, all checked here: a bad one stops the job before anything is written."""
+    parser = ArgumentParser(prog="sb3-pola run", description=__doc__)
     parser.add_argument("--dataset", default=DEFAULT_DATASET, help="Minari dataset id or path (default: the shipped one)")
-    parser.add_argument("--steps", type=int, default=6000, help="gradient steps")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=int_at_least(1), default=6000, help="gradient steps")
+    parser.add_argument("--seed", type=int_at_least(0), default=0, help="random seed")
     parser.add_argument("--out", default="outputs/main", help="output folder")
     parser.add_argument("--config", choices=sorted(CONFIGS), default="light", help="hyperparameter set")
-    parser.add_argument("--eval-freq", type=int, default=0, help="gradient steps between evaluations (default: steps/6)")
-    parser.add_argument("--eval-episodes", type=int, default=5, help="episodes per periodic evaluation")
-    parser.add_argument("--final-episodes", type=int, default=10, help="episodes of the final evaluation")
-    parser.add_argument("--device", default="auto")
+    parser.add_argument("--eval-freq", type=int_at_least(0), default=0, help="gradient steps between evaluations (0: steps/6)")
+    parser.add_argument("--eval-episodes", type=int_at_least(1), default=5, help="episodes per periodic evaluation")
+    parser.add_argument("--final-episodes", type=int_at_least(1), default=10, help="episodes of the final evaluation")
+    parser.add_argument("--device", default="auto", help="cpu, cuda or auto")
     parser.add_argument("--download", action="store_true", help="let Minari download a missing dataset id")
     parser.add_argument(
         "--compile",
@@ -67,9 +68,23 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     # One thread by default: the light configuration's small matmuls gain little from more, and on a
     # machine whose cores are busy OpenMP's spin-waiting makes a multi-thread run much slower.
-    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: torch's default)")
-    parser.add_argument("--extra", help="JSON of further POLA arguments, e.g. '{\"backprop_through_model\": false}'")
+    parser.add_argument("--threads", type=int_at_least(0), default=1, help="torch CPU threads (0: torch's default)")
+    parser.add_argument(
+        "--extra", type=json_object, help="JSON of further POLA arguments, e.g. '{\"backprop_through_model\": false}'"
+    )
     return parser.parse_args(argv)
+
+
+def check_extra(extra: dict[str, Any] | None) -> None:
+    """``--extra``'s keys are POLA arguments (a typo is refused before anything runs)."""
+    import inspect
+
+    from sb3_pola import POLA
+
+    known = set(inspect.signature(POLA.__init__).parameters) - {"self", "policy", "dataset", "seed", "device"}
+    unknown = sorted(set(extra or {}) - known)
+    if unknown:
+        raise UsageError(f"--extra has unknown POLA argument(s) {', '.join(unknown)} (see help(sb3_pola.POLA))")
 
 
 def plot_curve(
@@ -114,29 +129,29 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     import torch as th
     from stable_baselines3.common.evaluation import evaluate_policy
-    from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from sb3_pola import POLA
     from sb3_pola.common.callbacks import NormalizedScoreEvalCallback
     from sb3_pola.common.datasets import load_offline_dataset, make_env
 
+    check_extra(args.extra)
     if args.threads > 0:
         th.set_num_threads(args.threads)
     out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
 
     data = load_offline_dataset(args.dataset, download=args.download)
     dataset_return = float(np.mean(data.episode_returns))
     dataset_score = data.normalized_score(data.episode_returns)
-    eval_env = DummyVecEnv([lambda: Monitor(make_env(data))])
     hyperparameters = {
         **CONFIGS[args.config],
         **({"compile_update": True} if args.compile else {}),
-        **(json.loads(args.extra) if args.extra else {}),
+        **(args.extra or {}),
     }
     model = POLA("MlpPolicy", dataset=args.dataset, seed=args.seed, device=args.device, **hyperparameters)
+    out.mkdir(parents=True, exist_ok=True)  # after the dataset and the arguments are known to be usable
+    eval_env = DummyVecEnv([lambda: make_env(data)])  # make_env wraps it with a Monitor
     eval_env.seed(args.seed + 1000)
 
     def score(returns: Any) -> float:
@@ -239,7 +254,8 @@ def main(argv: list[str] | None = None) -> int:
     ]
     width = max(len(k) for k, _ in rows)
     print("\n" + "\n".join(f"{k:<{width}} | {v}" for k, v in rows))
-    print(f"\nsaved: {out / 'model.zip'}, {out / 'learning_curve.png'}, {out / 'results.json'}")
+    written = [out / "model.zip", out / "learning_curve.png", out / "results.json", out / "evaluations.npz"]
+    print(f"\nsaved: {', '.join(str(path) for path in written if path.exists())}")
     return 0
 
 

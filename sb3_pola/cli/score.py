@@ -42,6 +42,7 @@ from dataclasses import asdict
 import torch as th
 
 from sb3_pola.cli.options import datasets_path
+from sb3_pola.common.arguments import ArgumentParser, int_at_least, json_object
 from sb3_pola.common.machine import machine_info
 from sb3_pola.grid.ray_runner import run_grid
 from sb3_pola.grid.reevaluate import reevaluate
@@ -60,28 +61,30 @@ from sb3_pola.grid.variants import (
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="sb3-pola score",
         description="Train POLA and its ablations over datasets and seeds; write scores.csv, table.md and learning curves.",
     )
     parser.add_argument("--preset", choices=["auto", *PRESETS], default="auto", help="auto: paper on CUDA, cpu otherwise")
     parser.add_argument("--datasets", nargs="+", default=DEFAULT_DATASETS, help="Minari dataset ids")
     parser.add_argument("--variants", nargs="+", default=DEFAULT_VARIANTS, choices=ALL_VARIANTS, metavar="VARIANT")
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    parser.add_argument("--steps", type=int, help="gradient steps per run")
-    parser.add_argument("--eval-freq", type=int, help="gradient steps between evaluations")
-    parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation")
-    parser.add_argument("--batch-size", type=int)
+    parser.add_argument("--seeds", nargs="+", type=int_at_least(0), default=[0, 1, 2])
+    parser.add_argument("--steps", type=int_at_least(1), help="gradient steps per run")
+    parser.add_argument("--eval-freq", type=int_at_least(1), help="gradient steps between evaluations")
+    parser.add_argument("--eval-episodes", type=int_at_least(1), help="episodes per evaluation")
+    parser.add_argument("--batch-size", type=int_at_least(1))
     parser.add_argument("--net-arch", type=int, nargs="+", help="hidden sizes of actor and critics")
-    parser.add_argument("--n-critics", type=int)
-    parser.add_argument("--top-k", type=int)
-    parser.add_argument("--n-action-samples", type=int, help="candidate actions per state at evaluation")
-    parser.add_argument("--dynamics-steps", type=int, help="cap on the dynamics model's fit (gradient steps)")
-    parser.add_argument("--dynamics-kwargs", help="JSON of EnsembleDynamics arguments, e.g. '{\"hidden_dim\": 128}'")
+    parser.add_argument("--n-critics", type=int_at_least(1))
+    parser.add_argument("--top-k", type=int_at_least(1))
+    parser.add_argument("--n-action-samples", type=int_at_least(1), help="candidate actions per state at evaluation")
+    parser.add_argument("--dynamics-steps", type=int_at_least(1), help="cap on the dynamics model's fit (gradient steps)")
+    parser.add_argument(
+        "--dynamics-kwargs", type=json_object, help="JSON of EnsembleDynamics arguments, e.g. '{\"hidden_dim\": 128}'"
+    )
     parser.add_argument(
         "--share-dynamics", action=argparse.BooleanOptionalAction, default=None, help="one dynamics fit per dataset"
     )
-    parser.add_argument("--extra", help="JSON of further POLA arguments, e.g. '{\"eta\": 0.5}'")
+    parser.add_argument("--extra", type=json_object, help="JSON of further POLA arguments, e.g. '{\"eta\": 0.5}'")
     parser.add_argument(
         "--compile", action=argparse.BooleanOptionalAction, default=None, help="compile_update (the cpu preset: on)"
     )
@@ -90,7 +93,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--out", default="outputs/score", help="output folder, or an fsspec URL (s3://bucket/run with s3fs installed, ...)"
     )
-    parser.add_argument("--threads", type=int, help="torch CPU threads")
+    parser.add_argument("--threads", type=int_at_least(0), help="torch CPU threads")
     parser.add_argument("--log-interval", type=int, help="gradient steps between rows of the training statistics")
     parser.add_argument(
         "--eval-rule",

@@ -38,9 +38,7 @@ from __future__ import annotations
 
 import argparse
 import collections
-import contextlib
 import dataclasses
-import io
 import json
 import sys
 import time
@@ -52,7 +50,7 @@ from gymnasium.envs.registration import EnvSpec
 
 from sb3_pola.collect.episodes import rollout, run_episodes
 from sb3_pola.collect.writer import MIN_REF_EPISODES, dataset_summary, datasets_root, write_dataset
-from sb3_pola.common.extras import missing_extra_message
+from sb3_pola.common.extras import import_gymnasium_robotics, missing_extra_message
 
 KINDS = ("planner", "random")
 MAZE_PREFIX = "PointMaze_"
@@ -76,8 +74,7 @@ def is_maze_env(env_id: str | None) -> bool:
 def require_robotics() -> None:
     """Import Gymnasium-Robotics and register its envs; :class:`MissingExtraError` if it is not installed."""
     try:
-        with contextlib.redirect_stderr(io.StringIO()):  # its import prints a notice about unrelated (Adroit) envs
-            import gymnasium_robotics
+        gymnasium_robotics = import_gymnasium_robotics()  # without its notice about the (unrelated) Adroit envs
     except ImportError as error:
         raise MissingExtraError(
             f"{missing_extra_message('collect', 'maze', error)} (or pip install gymnasium-robotics)"

@@ -19,15 +19,27 @@ import contextlib
 import json
 import os
 import pathlib
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeAlias
 
 import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.monitor import Monitor
 
-from sb3_pola.common.dataset_cache import ARRAY_FIELDS, cache_path, fingerprint, load_cache, save_cache
+from sb3_pola.common.dataset_cache import (
+    ARRAY_FIELDS,
+    cache_path,
+    fingerprint,
+    load_cache,
+    read_digest_index,
+    save_cache,
+    write_digest_index,
+)
 from sb3_pola.common.dict_obs import check_dict_space, flat_space, flatten_env, flatten_episode_observations
+from sb3_pola.common.errors import UserError
+from sb3_pola.common.extras import import_gymnasium_robotics
 from sb3_pola.common.metrics import normalized_score
 
 if TYPE_CHECKING:
@@ -43,7 +55,7 @@ D4RL_KINDS = ("random", "medium", "expert", "medium-replay", "medium-expert")
 _STATS_CHUNK = 65536
 
 
-class DatasetError(ValueError):
+class DatasetError(UserError, ValueError):
     """A dataset that cannot be used (unknown id, wrong spaces, bad values...)."""
 
 
@@ -55,6 +67,10 @@ class SpaceMismatchError(DatasetError):
     """The dataset's spaces do not match the environment's."""
 
 
+class DatasetCorruptError(DatasetError):
+    """A dataset file that cannot be read (truncated, damaged); the message names the file and how to get it back."""
+
+
 def package_datasets_dir() -> pathlib.Path:
     """Folder of the datasets shipped with the package (``sb3_pola/data/datasets``)."""
     return pathlib.Path(__file__).resolve().parent.parent / "data" / "datasets"
@@ -64,6 +80,19 @@ def minari_datasets_dir() -> pathlib.Path:
     """Minari's local datasets root, computed without creating it (minari's own helper does)."""
     path = os.environ.get("MINARI_DATASETS_PATH")
     return pathlib.Path(path) if path else pathlib.Path.home() / ".minari" / "datasets"
+
+
+def minari_root_label() -> str:
+    """Minari's folder as messages name it: ``(MINARI_DATASETS_PATH)`` only when that variable chose it."""
+    root = minari_datasets_dir()
+    if os.environ.get("MINARI_DATASETS_PATH"):
+        return f"{root} (MINARI_DATASETS_PATH)"
+    missing = "" if root.is_dir() else ", not created yet"
+    return f"{root} (Minari's default{missing}; set MINARI_DATASETS_PATH for another)"
+
+
+# a Minari dataset id ends in its version: ``halfcheetah/medium-v0``
+_MINARI_ID = re.compile(r"-v\d+$")
 
 
 def default_cache_dir() -> pathlib.Path:
@@ -93,6 +122,7 @@ class OfflineDataset:
     :param metadata: raw Minari metadata (``env_spec`` JSON etc.)
     :param dict_observation_space: the original ``Dict`` observation space, if the dataset's observations
         are dicts (the arrays hold them flattened in its key order)
+    :param fingerprint: hash of the dataset's content (its files' bytes and metadata), if it was read from files
     """
 
     observations: np.ndarray
@@ -109,6 +139,7 @@ class OfflineDataset:
     episode_returns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float64))
     metadata: dict[str, Any] = field(default_factory=dict, repr=False)
     dict_observation_space: gym.spaces.Dict | None = None
+    fingerprint: str | None = None
 
     def __len__(self) -> int:
         return int(self.observations.shape[0])
@@ -210,6 +241,8 @@ def resolve_dataset_path(dataset: DatasetLocation, download: bool = False) -> pa
         if data_dir is not None:
             return data_dir
         if isinstance(dataset, os.PathLike) or os.path.isabs(dataset):
+            if not path.exists():
+                raise DatasetNotFoundError(f"No such folder {path}: a dataset path must be a Minari dataset folder")
             raise DatasetNotFoundError(f"{path} is not a Minari dataset folder (no data/{METADATA_FILE} in it)")
     if not isinstance(dataset, str):
         raise TypeError(f"dataset must be a Minari id, a path or a MinariDataset, not {type(dataset).__name__}")
@@ -221,10 +254,16 @@ def resolve_dataset_path(dataset: DatasetLocation, download: bool = False) -> pa
         data_dir = _find_dataset_id(dataset)
     if data_dir is None:
         local = list_local_datasets()
+        listing = f"Local datasets: {', '.join(local) if local else 'none'}."
+        if os.path.isabs(dataset) or dataset.startswith((".", "~")) or not _MINARI_ID.search(dataset):
+            # a path, or at least not an id that Minari could download
+            raise DatasetNotFoundError(
+                f"Unknown dataset {dataset!r}: no such folder, and not a Minari dataset id (ids end in -v<N>, e.g. "
+                f"invertedpendulum/medium-v0). {listing}"
+            )
         raise DatasetNotFoundError(
-            f"Unknown dataset {dataset!r}: not in {minari_datasets_dir()} (MINARI_DATASETS_PATH) nor in the package's "
-            f"{package_datasets_dir()}. Local datasets: {', '.join(local) if local else 'none'}. "
-            f"Download it with `minari download {dataset}` or load_offline_dataset(..., download=True), "
+            f"Unknown dataset {dataset!r}: not in {minari_root_label()} nor in the package's {package_datasets_dir()}. "
+            f"{listing} Download it with `minari download {dataset}` or load_offline_dataset(..., download=True), "
             "or make one with `sb3-pola collect`."
         )
     return data_dir
@@ -369,6 +408,32 @@ def same_spaces(dataset_space: gym.Space, env_space: gym.Space, bounds: bool) ->
     return bool(np.allclose(env_space.low, dataset_space.low) and np.allclose(env_space.high, dataset_space.high))
 
 
+def corrupt_dataset_message(data_dir: pathlib.Path, dataset_id: str | None, metadata: dict[str, Any], error: Exception) -> str:
+    """One line naming a dataset file that cannot be read, and how to get a good copy back.
+
+    :param data_dir: the dataset's ``data`` folder
+    :param dataset_id: its id, if known
+    :param metadata: its metadata (``collect_command``: the command that recorded it)
+    :param error: what reading it raised
+    :return: the message
+    """
+    files = sorted(data_dir.glob("*.hdf5")) or sorted(p for p in data_dir.iterdir() if p.name != METADATA_FILE)
+    file = files[0] if files else data_dir
+    cause = " ".join(str(error).split())[:200] or type(error).__name__
+    if metadata.get("collect_command"):
+        fix = f"re-collect it with the command in its metadata: `{metadata['collect_command']}` (with --overwrite)"
+    elif data_dir.resolve().is_relative_to(package_datasets_dir()):
+        fix = (
+            "it ships with sb3_pola: reinstall the package (`pip install --force-reinstall sb3_pola`; in a clone, "
+            "`git checkout -- sb3_pola/data`)"
+        )
+    elif dataset_id and _MINARI_ID.search(dataset_id):
+        fix = f"re-download it with `minari download --force {dataset_id}` if it is one of Minari's, else re-create it"
+    else:
+        fix = f"copy or re-create the dataset folder {data_dir.parent} again"
+    return f"{file} is truncated or corrupt, dataset {dataset_id!r} cannot be read ({cause}): {fix}"
+
+
 def load_offline_dataset(
     dataset: DatasetLocation,
     *,
@@ -391,10 +456,16 @@ def load_offline_dataset(
     :return: the dataset
     """
     data_dir = resolve_dataset_path(dataset, download=download)
-    metadata = read_metadata(data_dir)
+    try:
+        metadata = read_metadata(data_dir)
+    except (OSError, ValueError) as error:
+        raise DatasetCorruptError(corrupt_dataset_message(data_dir, str(dataset), {}, error)) from error
     dataset_id = metadata.get("dataset_id") or (dataset if isinstance(dataset, str) else None)
     where = f"dataset {dataset_id!r} ({data_dir})"
-    observation_space, action_space = _spaces(metadata, data_dir)
+    try:
+        observation_space, action_space = _spaces(metadata, data_dir)
+    except (OSError, KeyError, RuntimeError) as error:
+        raise DatasetCorruptError(corrupt_dataset_message(data_dir, dataset_id, metadata, error)) from error
     _check_spaces(observation_space, action_space, where)
     dict_space = observation_space if isinstance(observation_space, gym.spaces.Dict) else None
     if dict_space is not None:
@@ -419,20 +490,23 @@ def load_offline_dataset(
 
     arrays = None
     cache_file = None
+    root = pathlib.Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    content_key, digests = fingerprint(data_dir, metadata, read_digest_index(root) if use_cache else None)
     if use_cache:
-        root = pathlib.Path(cache_dir) if cache_dir is not None else default_cache_dir()
-        cache_file = cache_path(root, dataset_id, n_steps, fingerprint(data_dir, metadata))
+        cache_file = cache_path(root, dataset_id, n_steps, content_key)
         arrays = load_cache(cache_file, n_steps, obs_dim, act_dim)
         if arrays is not None and len(arrays["episode_returns"]) != n_episodes:
             arrays = None
     if arrays is None:
-        from minari.dataset.minari_storage import MinariStorage
-
-        storage = MinariStorage.read(data_dir)
-        episodes = storage.get_episodes(range(n_episodes))
-        arrays = _build_arrays(episodes, n_steps, n_episodes, obs_dim, act_dim, action_space, where, progress, dict_space)
-        if cache_file is not None:
-            save_cache(cache_file, arrays)
+        arrays = _read_arrays(
+            data_dir, dataset_id, metadata, (n_steps, n_episodes, obs_dim, act_dim), action_space, where, progress, dict_space
+        )
+        if cache_file is not None:  # only arrays read whole and checked are cached
+            save_cache(
+                cache_file, arrays, {"dataset_id": dataset_id, "source": str(data_dir.resolve()), "fingerprint": content_key}
+            )
+    if use_cache:
+        write_digest_index(root, digests)
 
     ref_min, ref_max = metadata.get("ref_min_score"), metadata.get("ref_max_score")
     return OfflineDataset(
@@ -450,10 +524,38 @@ def load_offline_dataset(
         episode_returns=arrays["episode_returns"],
         metadata=metadata,
         dict_observation_space=dict_space,
+        fingerprint=content_key,
     )
 
 
-def make_env(dataset: OfflineDataset | str | os.PathLike, eval_env: bool = True, **env_kwargs: Any) -> gym.Env:
+def _read_arrays(
+    data_dir: pathlib.Path,
+    dataset_id: str | None,
+    metadata: dict[str, Any],
+    sizes: tuple[int, int, int, int],
+    action_space: gym.spaces.Box,
+    where: str,
+    progress: bool,
+    dict_space: gym.spaces.Dict | None,
+) -> dict[str, np.ndarray]:
+    """Every episode of the dataset's files into flat arrays (:func:`_build_arrays`); a file that cannot be read
+    raises :class:`DatasetCorruptError` naming it and the fix."""
+    from minari.dataset.minari_storage import MinariStorage
+
+    n_steps, n_episodes, obs_dim, act_dim = sizes
+    try:
+        storage = MinariStorage.read(data_dir)
+        episodes = storage.get_episodes(range(n_episodes))
+        return _build_arrays(episodes, n_steps, n_episodes, obs_dim, act_dim, action_space, where, progress, dict_space)
+    except DatasetError:
+        raise
+    except (OSError, KeyError, ValueError, RuntimeError, TypeError, IndexError) as error:  # h5py's, on a damaged file
+        raise DatasetCorruptError(corrupt_dataset_message(data_dir, dataset_id, metadata, error)) from error
+
+
+def make_env(
+    dataset: OfflineDataset | str | os.PathLike, eval_env: bool = True, monitor: bool = True, **env_kwargs: Any
+) -> gym.Env:
     """The environment to evaluate a policy of the dataset in, from its Minari env spec (with its time limit).
 
     Minari datasets may record an ``eval_env_spec`` next to the ``env_spec`` they were collected in (the
@@ -462,13 +564,20 @@ def make_env(dataset: OfflineDataset | str | os.PathLike, eval_env: bool = True,
 
     :param dataset: a loaded dataset, or a Minari id / dataset folder
     :param eval_env: prefer the ``eval_env_spec``; ``False``: the env the data was collected in
+    :param monitor: wrap it in SB3's ``Monitor`` (episode returns and lengths), so that SB3's evaluation of it warns
+        of nothing
     :param env_kwargs: extra arguments for ``gym.make`` (e.g. ``render_mode``)
     :return: a new environment
     """
+
+    def finish(env: gym.Env) -> gym.Env:
+        env = flatten_env(env)
+        return Monitor(env) if monitor else env
+
     if isinstance(dataset, OfflineDataset):
         metadata = dataset.metadata
         if not metadata.get("env_spec") and dataset.env_id is not None:
-            return flatten_env(gym.make(dataset.env_id, **env_kwargs))
+            return finish(gym.make(dataset.env_id, **env_kwargs))
     else:
         metadata = read_metadata(resolve_dataset_path(dataset))
     if eval_env and metadata.get("eval_env_spec"):
@@ -484,7 +593,10 @@ def make_env(dataset: OfflineDataset | str | os.PathLike, eval_env: bool = True,
         .replace('"apply_api_compatibility": false,', "")
         .replace('"autoreset": false, ', "")
     )
-    return flatten_env(gym.make(EnvSpec.from_json(spec_str), **env_kwargs))
+    spec = EnvSpec.from_json(spec_str)
+    if isinstance(spec.entry_point, str) and spec.entry_point.startswith("gymnasium_robotics"):
+        import_gymnasium_robotics()  # imported here, quietly, rather than by gym.make
+    return finish(gym.make(spec, **env_kwargs))
 
 
 def synthetic_dataset(n: int, obs_dim: int, act_dim: int, env_id: str | None = None, seed: int = 0) -> OfflineDataset:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -42,6 +43,26 @@ FIT_KWARGS = (
     "logger",
     "verbose",
 )
+
+
+# the fit's budget when none is given (POLA's default): this many passes over the data, and at least MIN_AUTO_STEPS
+# gradient steps; early stopping ends most fits of large datasets before it (1M transitions: 3 epochs of 1000 steps)
+AUTO_PASSES = 10
+MIN_AUTO_STEPS = 1000
+
+
+def auto_max_steps(n_transitions: int, batch_size: int = 256, holdout_ratio: float = 0.2, max_holdout: int = 1000) -> int:
+    """A fit's step budget sized to the data: :data:`AUTO_PASSES` passes over the training split, at least
+    :data:`MIN_AUTO_STEPS` steps (30k transitions: 1,140 steps, about 40 s of the default ensemble on one CPU core).
+
+    :param n_transitions: the dataset's transitions
+    :param batch_size: the fit's minibatch size
+    :param holdout_ratio: the fit's holdout fraction
+    :param max_holdout: the fit's maximum holdout size
+    :return: the ``max_steps`` of the fit
+    """
+    n_train = n_transitions - min(int(n_transitions * holdout_ratio), max_holdout)
+    return max(MIN_AUTO_STEPS, AUTO_PASSES * math.ceil(max(n_train, 1) / batch_size))
 
 
 def check_fit_kwargs(kwargs: dict, name: str = "dynamics_fit_kwargs") -> None:
@@ -391,9 +412,10 @@ class DynamicsTrainer:
     :param max_steps: stop after this many gradient steps in total (``None``: no limit)
     :param patience: epochs without a >1% improvement of any member before stopping
     :param max_epoch_steps: cap on the gradient steps of one epoch (``None``: a full pass)
-    :param progress_bar: show a tqdm bar over epochs
-    :param logger: SB3 logger; ``dynamics/*`` values are recorded and dumped after every epoch
-    :param verbose: 1: a summary line at the end, 2: a line per epoch
+    :param progress_bar: show a tqdm bar over epochs (total: the epoch limit; postfix: the holdout score), on a terminal
+    :param logger: SB3 logger; ``dynamics/*`` values are recorded and dumped after every epoch (to stdout at
+        ``verbose >= 2`` only)
+    :param verbose: 1: a summary line at the end, 2: a line and the logger's table per epoch
     """
 
     def __init__(
@@ -477,7 +499,7 @@ class DynamicsTrainer:
         model.requires_grad_(True)
         model.train()
         stopping = EarlyStopping(model, self.patience)
-        self._open_progress()
+        self._open_progress(self._epoch_limit(batches.steps_per_pass))
         epoch, step, train_loss = 0, 0, float("nan")
         while self._within_budget(epoch, step):
             n_steps = self._epoch_steps(batches.steps_per_pass, step)
@@ -556,12 +578,27 @@ class DynamicsTrainer:
         n_steps = steps_per_pass if self.max_epoch_steps is None else max(1, min(steps_per_pass, self.max_epoch_steps))
         return n_steps if self.max_steps is None else min(n_steps, self.max_steps - step)
 
-    def _open_progress(self) -> None:
-        """Open the tqdm bar over epochs, with ``progress_bar``."""
+    def _epoch_limit(self, steps_per_pass: int) -> int | None:
+        """The most epochs ``max_epochs`` and ``max_steps`` allow (``None``: no limit but early stopping).
+
+        :param steps_per_pass: steps of one pass over the resample
+        :return: the epoch limit
+        """
+        limits = [] if self.max_epochs is None else [self.max_epochs]
+        if self.max_steps is not None:
+            limits.append(math.ceil(self.max_steps / self._epoch_steps(steps_per_pass, 0)))
+        return min(limits) if limits else None
+
+    def _open_progress(self, total: int | None) -> None:
+        """Open the bar over epochs, with ``progress_bar``: the epoch limit as its total, hence an ETA; no bar (nor
+        cursor codes) when stderr is not a terminal (``disable=None``).
+
+        :param total: the epoch limit (``None``: none)
+        """
         if self.progress_bar:
             from tqdm.auto import tqdm
 
-            self._pbar = tqdm(total=self.max_epochs, desc="dynamics", unit="epoch")
+            self._pbar = tqdm(total=total, desc="dynamics fit", unit="epoch", disable=None, leave=False)
 
     def _close_progress(self) -> None:
         """Close the tqdm bar, if any."""
@@ -576,9 +613,7 @@ class DynamicsTrainer:
         :param epochs_since_improvement: epochs without an improvement of any member
         """
         if self.logger is not None:
-            for key, value in record.items():
-                self.logger.record(key, value)
-            self.logger.dump(step=int(record["dynamics/steps"]))
+            self._dump(record, step=int(record["dynamics/steps"]))
         if self.verbose >= 2:
             r = {key.removeprefix("dynamics/"): value for key, value in record.items()}
             print(
@@ -590,8 +625,25 @@ class DynamicsTrainer:
         if self._pbar is not None:
             self._pbar.update(1)
             self._pbar.set_postfix(
-                loss=f"{record['dynamics/train_loss']:.3f}", holdout=f"{record['dynamics/holdout_norm_mse']:.4f}"
+                holdout=f"{record['dynamics/holdout_norm_mse']:.4f}",
+                best=f"{record['dynamics/best_holdout_norm_mse']:.4f}",
+                refresh=False,
             )
+
+    def _dump(self, record: dict[str, float], step: int) -> None:
+        """Record and dump values to the logger: every output format, but stdout only at ``verbose >= 2`` (a table
+        per epoch buries the rest; the bar and the summary line say what matters).
+
+        :param record: the values
+        :param step: the logger's step
+        """
+        assert self.logger is not None
+        exclude = None if self.verbose >= 2 else ("stdout", "log")
+        for key, value in record.items():
+            self.logger.record(key, value, exclude=exclude)
+        with warnings.catch_warnings():  # with stdout excluded, its format has nothing to write and says so
+            warnings.filterwarnings("ignore", message="Tried to write empty key-value dict")
+            self.logger.dump(step=step)
 
     def _report_fit(self, metrics: dict[str, float]) -> None:
         """Log and print the fit's final metrics.
@@ -600,9 +652,7 @@ class DynamicsTrainer:
         """
         step = int(metrics["steps"])
         if self.logger is not None:
-            for key, value in metrics.items():
-                self.logger.record(f"dynamics/{key}", value)
-            self.logger.dump(step=step)
+            self._dump({f"dynamics/{key}": value for key, value in metrics.items()}, step=step)
         if self.verbose >= 1:
             print(
                 f"dynamics fit: {int(metrics['epochs'])} epochs, {step} steps, {metrics['fit_time']:.1f} s; holdout "

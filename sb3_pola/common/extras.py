@@ -6,6 +6,12 @@ traceback. It imports nothing of the package, so every layer can use it.
 
 from __future__ import annotations
 
+import contextlib
+import importlib
+import io
+import sys
+from typing import Any
+
 # the distribution name of setup.py, as pip takes it: pip install "sb3_pola[zoo]"
 DISTRIBUTION = "sb3_pola"
 
@@ -76,3 +82,30 @@ def missing_extra_message(command: str, extra: str, error: BaseException | None 
     modules = _missing_modules(error) if error is not None else []
     detail = f" (missing module {modules[0]!r})" if modules else ""
     return f'sb3-pola {command} needs the "{extra}" extra: {install_hint(extra)}{detail}'
+
+
+def import_gymnasium_robotics() -> Any:
+    """Import Gymnasium-Robotics (the ``maze`` extra) without the notice its import prints.
+
+    Its ``__init__`` prints a Farama notification about the Adroit hand envs' rewards to stderr, which has nothing to do
+    with the point mazes; only that paragraph is dropped, anything else the import writes is passed on.
+
+    :return: the module
+    :raises ImportError: it is not installed
+    """
+    if "gymnasium_robotics" in sys.modules:
+        return sys.modules["gymnasium_robotics"]
+    captured = io.StringIO()
+    with contextlib.redirect_stderr(captured):
+        module = importlib.import_module("gymnasium_robotics")
+    text = captured.getvalue()
+    try:
+        from farama_notifications import notifications
+
+        notice = notifications.get("gymnasium_robotics", {}).get(getattr(module, "__version__", ""))
+    except ImportError:
+        notice = None
+    if notice:
+        text = text.replace(notice + "\n", "", 1)
+    sys.stderr.write(text)
+    return module

@@ -11,13 +11,19 @@ import os
 import pathlib
 import zipfile
 
+from sb3_pola.common.errors import UserError
+
 
 class DivergenceError(FloatingPointError):
     """Training produced NaN or inf in a loss or in the parameters."""
 
 
-class ModelFileError(ValueError):
+class ModelFileError(UserError, ValueError):
     """A model file is missing a part, truncated, corrupt, or not a model of this algorithm."""
+
+
+class ModelFileNotFoundError(ModelFileError, FileNotFoundError):
+    """No model file at the given path."""
 
 
 def _ends_with_zip_directory(path: pathlib.Path, size: int) -> bool:
@@ -43,7 +49,7 @@ def validate_model_file(path: str | os.PathLike, policy_classes: tuple[type, ...
     :param policy_classes: accepted policy classes (empty: any)
     :param algorithm_name: name used in the messages
     :return: the saved ``data`` (class parameters)
-    :raises FileNotFoundError: no such file
+    :raises ModelFileNotFoundError: no such file (a ``FileNotFoundError``)
     :raises ModelFileError: truncated, corrupt, or not a model of this algorithm
     """
     from stable_baselines3.common.save_util import json_to_data
@@ -52,7 +58,7 @@ def validate_model_file(path: str | os.PathLike, policy_classes: tuple[type, ...
     candidates = [path] if path.suffix == ".zip" else [path, path.with_name(path.name + ".zip")]
     found = next((p for p in candidates if p.is_file()), None)
     if found is None:
-        raise FileNotFoundError(f"No model file at {' or '.join(map(str, candidates))}")
+        raise ModelFileNotFoundError(f"No model file at {' or '.join(map(str, candidates))}")
     what = f"{algorithm_name} model file" if algorithm_name else "model file"
     size = found.stat().st_size
     if not _ends_with_zip_directory(found, size):
@@ -95,4 +101,4 @@ def validate_model_file(path: str | os.PathLike, policy_classes: tuple[type, ...
     return data
 
 
-__all__ = ["DivergenceError", "ModelFileError", "validate_model_file"]
+__all__ = ["DivergenceError", "ModelFileError", "ModelFileNotFoundError", "validate_model_file"]

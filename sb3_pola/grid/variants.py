@@ -17,6 +17,7 @@ from typing import Any
 
 import torch as th
 
+from sb3_pola.common.errors import UsageError
 from sb3_pola.common.schedules import WarmupSchedule
 from sb3_pola.pola import PAPER_FORM, POLA
 
@@ -194,18 +195,23 @@ def build_config(args: argparse.Namespace, device: str) -> Config:
     if args.dynamics_steps is not None:
         config.dynamics_fit_kwargs = {**config.dynamics_fit_kwargs, "max_steps": args.dynamics_steps}
     if args.dynamics_kwargs:
-        config.dynamics_kwargs = {**config.dynamics_kwargs, **json.loads(args.dynamics_kwargs)}
+        config.dynamics_kwargs = {**config.dynamics_kwargs, **_json(args.dynamics_kwargs)}
     if args.share_dynamics is not None:
         config.share_dynamics = args.share_dynamics
     if args.extra:
-        config.extra = {**config.extra, **json.loads(args.extra)}
+        config.extra = {**config.extra, **_json(args.extra)}
     if args.compile is not None:
         config.extra = {**config.extra, "compile_update": args.compile}
     config.top_k = min(config.top_k, config.n_critics)
     parse_eval_rule(config.eval_rule)
     if config.steps < 1 or config.eval_freq < 1 or config.eval_episodes < 1:
-        raise ValueError("steps, eval_freq and eval_episodes must be positive")
+        raise UsageError("steps, eval_freq and eval_episodes must be positive")
     return config
+
+
+def _json(value: str | dict[str, Any]) -> dict[str, Any]:
+    """A JSON object given on the command line (already parsed by the parser's type, or text)."""
+    return json.loads(value) if isinstance(value, str) else dict(value)
 
 
 def pola_kwargs(extra: dict[str, Any]) -> dict[str, Any]:
@@ -244,7 +250,7 @@ def parse_eval_rule(rule: str) -> tuple[str, int, bool]:
     if rule in ("ema", "online"):
         return rule, 1, True
     if match is None or (match.group(3) is not None and int(match.group(3)) < 1):
-        raise ValueError(f"unknown evaluation rule {rule!r}: ema, online, [online-]stochastic or [online-]candidates<N>")
+        raise UsageError(f"unknown evaluation rule {rule!r}: ema, online, [online-]stochastic or [online-]candidates<N>")
     actor = "online" if match.group(1) else "ema"
     if match.group(2) == "stochastic":
         return actor, 1, False

@@ -26,6 +26,7 @@ from gymnasium import spaces
 from torch import nn
 
 from sb3_pola.common.activations import FusedMish, inference_mish
+from sb3_pola.common.errors import UserError
 from sb3_pola.common.torch_layers import StateProductsExtractor
 from sb3_pola.pola.actor import DiffusionActor, noise_from_projection, observation_noise_projection
 from sb3_pola.pola.fast_sampling import InferencePlan, inference_plan, run_plan
@@ -38,7 +39,7 @@ OUTPUT_NAME = "action"
 TORCHSCRIPT_SUFFIXES = (".pt", ".pth", ".ts", ".jit")
 
 
-class PolicyExportError(ValueError):
+class PolicyExportError(UserError, ValueError):
     """The policy cannot be exported (a configuration the static graph cannot reproduce)."""
 
 

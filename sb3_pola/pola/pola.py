@@ -18,10 +18,11 @@ from torch.nn.utils import clip_grad_norm_
 from sb3_pola.common.activations import eager_activations
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.compile import CompiledLoss
-from sb3_pola.common.datasets import DatasetLocation, OfflineDataset
+from sb3_pola.common.datasets import DatasetError, DatasetLocation, OfflineDataset, resolve_dataset_path
 from sb3_pola.common.diffusion import BETA_SCHEDULES, PREDICTION_TYPES
 from sb3_pola.common.dynamics import check_dynamics_kwargs
-from sb3_pola.common.dynamics_trainer import DynamicsTrainer, check_fit_kwargs
+from sb3_pola.common.dynamics_cache import cache_key, data_fingerprint, fit_or_load
+from sb3_pola.common.dynamics_trainer import DynamicsTrainer, auto_max_steps, check_fit_kwargs
 from sb3_pola.common.errors import HyperparameterError
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.common.schedules import cosine_schedule
@@ -56,6 +57,16 @@ PAPER_FORM: dict[str, Any] = {
     "prediction_type": "epsilon",
     "learning_rate": 3e-4,
 }
+
+
+def _dataset_source(dataset: Any) -> str | None:
+    """The folder of a dataset given by id or path, for the dynamics cache's listing (``None`` if unknown)."""
+    if not isinstance(dataset, str | os.PathLike):
+        return None
+    try:
+        return str(resolve_dataset_path(dataset))
+    except (DatasetError, TypeError):
+        return None
 
 
 # ------------------------------------------------------------------ argument checks (issue #25)
@@ -217,7 +228,15 @@ class POLA(OfflineAlgorithm):
     :param ema_update_freq: gradient steps between EMA updates
     :param ema_start: gradient step from which the EMA averages (before it copies the actor)
     :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`
-    :param dynamics_fit_kwargs: arguments of :class:`~sb3_pola.common.dynamics_trainer.DynamicsTrainer`
+    :param dynamics_fit_kwargs: arguments of :class:`~sb3_pola.common.dynamics_trainer.DynamicsTrainer`. With neither
+        ``max_epochs`` nor ``max_steps`` in it, the fit's budget is sized to the data
+        (:func:`~sb3_pola.common.dynamics_trainer.auto_max_steps`: 10 passes over the data, at least 1,000 gradient
+        steps; early stopping may end it sooner); ``{"max_steps": None}`` fits until early stopping alone ends it
+    :param dynamics_cache: keep the fitted dynamics model in the user's cache (``$SB3_POLA_CACHE_DIR/dynamics``, else
+        ``~/.cache/sb3_pola/dynamics``) and reuse it: a later ``learn`` on the same dataset content, dynamics
+        configuration, fit arguments and seed loads it instead of fitting again, and trains exactly as after the fit
+        (the random state the fit leaves is restored; :mod:`~sb3_pola.common.dynamics_cache`). ``False``: always fit,
+        keep nothing
     :param compile_update: compile the critic and actor losses (forward and backward) with ``torch.compile``
         for the static shapes of training, and on CUDA capture them as CUDA graphs (the GPU speed path).
         The first gradient step compiles (one to three minutes on a small CPU); random draws match eager
@@ -271,6 +290,7 @@ class POLA(OfflineAlgorithm):
         ema_start: int = 1000,
         dynamics_kwargs: dict[str, Any] | None = None,
         dynamics_fit_kwargs: dict[str, Any] | None = None,
+        dynamics_cache: bool = True,
         compile_update: bool = False,
         download: bool = False,
         policy_kwargs: dict[str, Any] | None = None,
@@ -345,6 +365,7 @@ class POLA(OfflineAlgorithm):
         self.dynamics_kwargs = dynamics_kwargs or {}
         self.dynamics_fit_kwargs = dynamics_fit_kwargs or {}
         self.dynamics_fit_info: dict[str, float] = {}
+        self.dynamics_cache = dynamics_cache
         self.compile_update = compile_update
         if compile_update:  # Mish as one exp inside the compiled graph: inductor fuses it into a single kernel
             self.policy_kwargs = {"compile_activations": True, **self.policy_kwargs}
@@ -432,13 +453,43 @@ class POLA(OfflineAlgorithm):
             return
         buffer = self._setup_offline_data()
         fit_kwargs = {"progress_bar": progress_bar, "logger": self.logger, "verbose": self.verbose, **self.dynamics_fit_kwargs}
-        self.dynamics_fit_info = DynamicsTrainer(dynamics, **fit_kwargs).fit(
-            buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones
-        )
+        fit_kwargs = self._sized_fit_kwargs(fit_kwargs, len(buffer.observations))
+
+        def fit() -> dict[str, float]:
+            return DynamicsTrainer(dynamics, **fit_kwargs).fit(
+                buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones
+            )
+
+        self.dynamics_fit_info = self._fit_or_load_dynamics(fit, fit_kwargs)
         dynamics.freeze()
         self.policy.dynamics_fitted.fill_(True)
-        if self.verbose >= 1:
-            print(f"Dynamics model fitted: {self.dynamics_fit_info}")
+
+    # ------------------------------------------------------------------ the dynamics fit: its size, its cache (issue #25)
+    def _sized_fit_kwargs(self, fit_kwargs: dict[str, Any], n_transitions: int) -> dict[str, Any]:
+        """The fit's arguments: a bar at ``verbose >= 1`` too, and, when no budget is given, one sized to the data
+        (:func:`~sb3_pola.common.dynamics_trainer.auto_max_steps`)."""
+        fit_kwargs = {**fit_kwargs, "progress_bar": fit_kwargs["progress_bar"] or self.verbose >= 1}
+        if "max_epochs" not in fit_kwargs and "max_steps" not in fit_kwargs:
+            sizes = {k: fit_kwargs[k] for k in ("batch_size", "holdout_ratio", "max_holdout") if k in fit_kwargs}
+            fit_kwargs["max_steps"] = auto_max_steps(n_transitions, **sizes)
+        return fit_kwargs
+
+    def _fit_or_load_dynamics(self, fit: Callable[[], dict[str, float]], fit_kwargs: dict[str, Any]) -> dict[str, float]:
+        """``fit()``, or its result from the cache of fitted dynamics models (``dynamics_cache``)."""
+        dynamics, buffer, data = self.policy.dynamics, self._setup_offline_data(), self._offline_data
+        assert dynamics is not None
+        if not getattr(self, "dynamics_cache", True):  # models saved before #25 have no such attribute
+            return fit()
+        arrays = [buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones]
+        data_key = data_fingerprint(data.fingerprint if data is not None else None, arrays)
+        result_kwargs = {k: v for k, v in fit_kwargs.items() if k not in ("progress_bar", "logger", "verbose")}
+        key = cache_key(dynamics, data_key, result_kwargs, self.device)
+        source = data.metadata.get("source") if data is not None else None
+        about = {
+            "dataset_id": data.dataset_id if data is not None else None,
+            "source": source or _dataset_source(self.dataset),
+        }
+        return fit_or_load(dynamics, fit, key, about, verbose=self.verbose)
 
     # ------------------------------------------------------------------ one gradient step
     def train(self, gradient_steps: int, batch_size: int = 256) -> None:
