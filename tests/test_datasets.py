@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import pathlib
 import shutil
@@ -32,6 +33,11 @@ N_STEPS = sum(length for length, _ in EPISODES)
 
 def _files(root: pathlib.Path) -> dict[str, tuple[int, int]]:
     return {str(p): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
+
+
+def _entries(cache: pathlib.Path) -> list[pathlib.Path]:
+    """The cache's entries (folders; the file digests' memo beside them is not one)."""
+    return sorted(p for p in cache.iterdir() if p.is_dir())
 
 
 def test_transitions_and_boundaries(tiny_dataset):
@@ -145,7 +151,7 @@ def test_one_normalized_score() -> None:
 def test_cache_hit(tiny_dataset, tmp_path, monkeypatch):
     cache = tmp_path / "cache"
     first = load_offline_dataset(tiny_dataset, cache_dir=cache)
-    entries = list(cache.iterdir())
+    entries = _entries(cache)
     assert len(entries) == 1 and (entries[0] / "manifest.json").is_file()
 
     def no_read(*args, **kwargs):
@@ -172,14 +178,14 @@ def test_cache_invalidated_when_dataset_changes(make_dataset, tmp_path):
     assert not np.array_equal(before.observations, after.observations)
     fresh = load_offline_dataset(dataset_id, use_cache=False)
     np.testing.assert_array_equal(after.observations, fresh.observations)
-    assert len(list(cache.iterdir())) == 2
+    assert len(_entries(cache)) == 2
 
 
 @pytest.mark.parametrize("damage", ["truncate", "bitflip", "wrong_shape", "manifest"])
 def test_corrupt_cache_rebuilt(tiny_dataset, tmp_path, damage):
     cache = tmp_path / "cache"
     good = load_offline_dataset(tiny_dataset, cache_dir=cache)
-    (entry,) = cache.iterdir()
+    (entry,) = _entries(cache)
     path = entry / "observations.npy"
     if damage == "truncate":
         path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
@@ -290,3 +296,122 @@ def test_shipped_dataset_loads():
     assert data.env_id == "InvertedPendulum-v5" and data.observations.shape[1] == 4
     assert data.ref_min_score is not None and data.ref_max_score is not None
     assert 0 < data.normalized_score(data.episode_returns) < 100
+
+
+# ----------------------------------------------------------------------------- issue #25: corrupt files, the cache's key
+
+
+def _truncated_copy(tiny_datasets_root: pathlib.Path, tiny_dataset: str, root: pathlib.Path) -> pathlib.Path:
+    """A copy of the tiny dataset under ``root`` as ``test/broken-v0``, its HDF5 file cut in half."""
+    target = root / "test" / "broken-v0"
+    shutil.copytree(tiny_datasets_root / tiny_dataset, target)
+    (hdf5,) = (target / "data").glob("*.hdf5")
+    hdf5.write_bytes(hdf5.read_bytes()[: hdf5.stat().st_size // 2])
+    return hdf5
+
+
+def test_truncated_file_is_named_with_a_fix(tiny_dataset, tiny_datasets_root, tmp_path, monkeypatch, capsys):
+    root = tmp_path / "datasets"
+    shutil.copytree(tiny_datasets_root / tiny_dataset, root / tiny_dataset)  # the intact copy
+    hdf5 = _truncated_copy(tiny_datasets_root, tiny_dataset, root)
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(root))
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("SB3_POLA_CACHE_DIR", str(cache))
+    with pytest.raises(ds.DatasetCorruptError) as info:
+        load_offline_dataset("test/broken-v0")
+    message = str(info.value)
+    assert "\n" not in message and str(hdf5) in message and "truncated or corrupt" in message
+    assert "minari download --force test/tiny-v0" in message  # the id in its metadata, which Minari could re-download
+    # nothing is cached from the broken file
+    assert not cache.exists() or not any(p.is_dir() for p in cache.iterdir())
+    # the command line: one line naming the file, exit status 2
+    from sb3_pola import cli
+
+    assert cli.main(["run", "--dataset", "test/broken-v0", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and str(hdf5) in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+    # `datasets --check` reads every dataset and flags the broken one (exit status 1); plain `datasets` cannot see it
+    assert datasets_cli.main([]) == 0
+    assert "BROKEN" not in capsys.readouterr().out
+    assert datasets_cli.main(["--check"]) == 1
+    lines = capsys.readouterr().out.splitlines()
+    broken = [line for line in lines if line.startswith("test/broken-v0")]
+    intact = [line for line in lines if line.startswith(tiny_dataset)]
+    assert len(broken) == 1 and "BROKEN" in broken[0] and str(hdf5) in broken[0]
+    assert len(intact) == 1 and intact[0].rstrip().endswith("ok")
+    assert not cache.exists() or not any(p.is_dir() for p in cache.iterdir())  # --check caches nothing
+    # the intact copy still loads, and is cached
+    assert len(load_offline_dataset(tiny_dataset)) == N_STEPS
+    assert len([p for p in cache.iterdir() if p.is_dir()]) == 1
+
+
+def test_collect_command_in_metadata_is_the_fix(tiny_dataset, tiny_datasets_root, tmp_path):
+    hdf5 = _truncated_copy(tiny_datasets_root, tiny_dataset, tmp_path)
+    metadata_file = hdf5.parent / "metadata.json"
+    metadata = json.loads(metadata_file.read_text())
+    metadata["collect_command"] = "sb3-pola collect --env Pendulum-v1 --kind random"
+    metadata_file.write_text(json.dumps(metadata))
+    with pytest.raises(
+        ds.DatasetCorruptError, match="re-collect it with the command in its metadata: `sb3-pola collect --env"
+    ):
+        load_offline_dataset(hdf5.parent.parent)
+
+
+def test_reinstall_reuses_the_cache_entry(tiny_dataset, tiny_datasets_root, tmp_path, monkeypatch):
+    """The cache is keyed by content: new file times (a reinstall, a copy) find the same entry, no second one."""
+    root = tmp_path / "datasets"
+    shutil.copytree(tiny_datasets_root / tiny_dataset, root / tiny_dataset)
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(root))
+    cache = tmp_path / "cache"
+    first = load_offline_dataset(tiny_dataset, cache_dir=cache)
+    entries = [p for p in cache.iterdir() if p.is_dir()]
+    for path in (root / tiny_dataset).rglob("*"):
+        os.utime(path, ns=(path.stat().st_atime_ns + 10**9, path.stat().st_mtime_ns + 10**9))
+
+    def no_read(*args, **kwargs):
+        raise AssertionError("episodes read again after a reinstall")
+
+    monkeypatch.setattr(ds, "_build_arrays", no_read)
+    second = load_offline_dataset(tiny_dataset, cache_dir=cache)
+    assert [p for p in cache.iterdir() if p.is_dir()] == entries
+    assert second.fingerprint == first.fingerprint
+    np.testing.assert_array_equal(first.observations, second.observations)
+
+
+def test_cache_listing_and_prune(make_dataset, tmp_path, monkeypatch, capsys):
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("SB3_POLA_CACHE_DIR", str(cache))
+    dataset_id = make_dataset("test/prune-v0")
+    load_offline_dataset(dataset_id)
+    root = pathlib.Path(os.environ["MINARI_DATASETS_PATH"])
+    shutil.rmtree(root / dataset_id)
+    write_minari_dataset(root, dataset_id, make_episodes(seed=1))  # changed: the old entry is of no more use
+    load_offline_dataset(dataset_id)
+    (cache / "old-format-entry").mkdir()
+    (cache / "old-format-entry" / "manifest.json").write_text('{"observations": {}}')
+    assert datasets_cli.main(["--cache"]) == 0
+    out = capsys.readouterr().out
+    assert "its dataset has changed" in out and "older cache format" in out and "in use" in out
+    assert "2 unused entries" in out
+    assert datasets_cli.main(["--cache", "--prune"]) == 0
+    assert "pruned 2 entries" in capsys.readouterr().out
+    assert len([p for p in cache.iterdir() if p.is_dir()]) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_offline_dataset(dataset_id)  # the entry in use was kept: a clean hit
+
+
+def test_minari_label_and_path_advice(tiny_dataset, tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("MINARI_DATASETS_PATH")
+    monkeypatch.setenv("HOME", str(tmp_path))  # no ~/.minari/datasets
+    with pytest.raises(DatasetNotFoundError) as info:
+        load_offline_dataset("test/missing-v0")
+    message = str(info.value)
+    assert "(MINARI_DATASETS_PATH)" not in message and "Minari's default, not created yet" in message
+    assert datasets_cli.main([]) == 0
+    assert "(MINARI_DATASETS_PATH)" not in capsys.readouterr().out
+    for path in ("outputs/my-data", str(tmp_path / "nothing-here"), "./x-v0"):
+        with pytest.raises(DatasetNotFoundError) as info:
+            load_offline_dataset(path)
+        assert "minari download" not in str(info.value) and "no such folder" in str(info.value).lower(), str(info.value)

@@ -9,7 +9,7 @@ from sb3_pola import POLA
 from sb3_pola.cli import run
 
 
-def test_main_job_writes_model_curve_and_results(tmp_path: pathlib.Path) -> None:
+def test_main_job_writes_model_curve_and_results(tmp_path: pathlib.Path, capsys) -> None:
     out = tmp_path / "main"
     extra = {
         "backprop_through_model": False,
@@ -29,6 +29,8 @@ def test_main_job_writes_model_curve_and_results(tmp_path: pathlib.Path) -> None
     assert (out / "learning_curve.png").stat().st_size > 0
     model = POLA.load(out / "model.zip", device="cpu")
     assert model.num_timesteps == 6 and model.backprop_through_model is False
+    saved = capsys.readouterr().out.splitlines()[-1]  # every file written is named
+    assert saved.startswith("saved: ") and all(f"{out / name}" in saved for name in ("model.zip", "evaluations.npz"))
 
 
 def test_main_job_on_the_shipped_maze_reports_its_success_rate(tmp_path: pathlib.Path) -> None:
