@@ -33,7 +33,19 @@ SelfOfflineAlgorithm = TypeVar("SelfOfflineAlgorithm", bound="OfflineAlgorithm")
 
 
 class OfflineProgressBarCallback(ProgressBarCallback):
-    """SB3's progress bar counting gradient steps; works without an env."""
+    """SB3's progress bar counting gradient steps; works without an env.
+
+    Drawn with ``tqdm.auto`` rather than SB3's rich bar, in the style of the dynamics fit's bar that precedes it (one
+    style for the package), and with ``disable=None``: no bar, nor its cursor codes, when stderr is not a terminal
+    (a log file).
+    """
+
+    def _on_training_start(self) -> None:
+        from tqdm.auto import tqdm
+
+        self.pbar = tqdm(
+            total=self.locals["total_timesteps"] - self.model.num_timesteps, desc="training", unit="step", disable=None
+        )
 
     def _on_step(self) -> bool:
         self.pbar.update(1)
@@ -280,7 +292,8 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
 
         :param total_timesteps: number of gradient steps
         :param callback: SB3 callback(s), called after every gradient step
-        :param log_interval: gradient steps between two logger dumps
+        :param log_interval: gradient steps between two logger dumps, and one at the end for the steps since the last
+            (``0``: no dumps)
         :param tb_log_name: name of the tensorboard run (default: the algorithm's class name)
         :param reset_num_timesteps: start counting from zero (``False`` continues a previous ``learn``)
         :param progress_bar: show a progress bar
@@ -306,6 +319,8 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
             if dump:
                 self.dump_logs()
         self.check_finite()
+        if log_interval > 0 and self._stat_count > 0:  # steps since the last dump (a learn shorter than log_interval)
+            self.dump_logs()
         callback.on_training_end()
         return self
 
