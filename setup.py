@@ -1,6 +1,6 @@
 import os
 
-from setuptools import find_packages, setup
+from setuptools import find_namespace_packages, setup
 
 with open(os.path.join("sb3_pola", "version.txt")) as file_handler:
     __version__ = file_handler.read().strip()
@@ -19,7 +19,9 @@ setup(
     description="POLA (Policy Optimization by Looking Ahead): model-based offline RL for Stable-Baselines3",
     long_description=long_description,
     long_description_content_type="text/markdown",
-    packages=[package for package in find_packages() if package.startswith("sb3_pola")],
+    # namespace discovery: the data folders (sb3_pola/data/...) are packages too, so setuptools does not warn that
+    # their files are data of a package missing from `packages`
+    packages=find_namespace_packages(include=["sb3_pola", "sb3_pola.*"]),
     # hyperparams/pola.yml: the rl-zoo3 default config of `sb3-pola train|optimize`, found through importlib.resources
     package_data={"sb3_pola": ["py.typed", "version.txt", "hyperparams/*.yml", "data/**/*"]},
     include_package_data=True,

@@ -250,6 +250,7 @@ def test_wheel_contains_the_config(tmp_path: pathlib.Path) -> None:
         timeout=300,
     )
     assert result.returncode == 0, result.stderr
+    assert "is absent from the `packages` configuration" not in result.stdout + result.stderr  # setuptools' warning
     (wheel,) = (tmp_path / "dist").glob("sb3_pola-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     assert "sb3_pola/hyperparams/pola.yml" in names

@@ -6,7 +6,9 @@ import contextlib
 import json
 import os
 import pathlib
+import shlex
 import shutil
+import sys
 import tempfile
 from collections.abc import Iterator
 from typing import Any
@@ -111,7 +113,7 @@ def write_dataset(
             description=description,
             data_format="hdf5",
         )
-        _repack(pathlib.Path(tmp) / dataset_id / "data", extra_metadata)
+        _repack(pathlib.Path(tmp) / dataset_id / "data", {**collect_command(), **(extra_metadata or {})})
         target.parent.mkdir(parents=True, exist_ok=True)
         os.replace(pathlib.Path(tmp) / dataset_id, target)
         if "/" in dataset_id:  # minari's namespace file, which `minari list local` expects
@@ -120,6 +122,16 @@ def write_dataset(
             if ns_file.exists() and not (out_root / namespace / ns_file.name).exists():
                 shutil.copy(ns_file, out_root / namespace / ns_file.name)
     return target
+
+
+def collect_command() -> dict[str, str]:
+    """``{"collect_command": "sb3-pola collect ..."}``, the command that is recording the dataset, for its metadata
+    (a corrupt copy is then re-collected with it, see :func:`~sb3_pola.common.datasets.corrupt_dataset_message`);
+    empty when not run as ``sb3-pola collect``."""
+    argv = sys.argv[1:]
+    if not argv or argv[0] != "collect":
+        return {}
+    return {"collect_command": shlex.join(["sb3-pola", *argv])}
 
 
 def dataset_summary(path: pathlib.Path, episodes: list[Any]) -> dict[str, Any]:
