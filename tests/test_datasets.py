@@ -6,6 +6,8 @@ import json
 import os
 import pathlib
 import shutil
+import subprocess
+import sys
 import warnings
 
 import gymnasium as gym
@@ -415,3 +417,13 @@ def test_minari_label_and_path_advice(tiny_dataset, tmp_path, monkeypatch, capsy
         with pytest.raises(DatasetNotFoundError) as info:
             load_offline_dataset(path)
         assert "minari download" not in str(info.value) and "no such folder" in str(info.value).lower(), str(info.value)
+
+
+def test_maze_env_without_the_adroit_notice():
+    """Gymnasium-Robotics' import prints a notice about its Adroit envs; making the maze's env does not show it."""
+    pytest.importorskip("gymnasium_robotics")
+    code = "from sb3_pola.common.datasets import make_env\nmake_env('pointmaze/umaze-v0')"
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "Adroit" not in result.stderr
