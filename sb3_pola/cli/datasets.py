@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Sequence
 from typing import Any
 
 from sb3_pola.common.arguments import ArgumentParser
@@ -24,7 +25,7 @@ from sb3_pola.common.datasets import (
 from sb3_pola.common.dynamics_cache import dynamics_entries
 
 
-def print_table(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:
+def print_table(header: tuple[str, ...], rows: Sequence[tuple[str, ...]]) -> None:
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
     for row in [header, *rows]:
         print("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=False)).rstrip())
@@ -44,7 +45,8 @@ def check_dataset(data_dir: Any) -> str:
 
 
 def list_datasets(check: bool) -> int:
-    rows, seen, broken = [], set(), 0
+    rows: list[tuple[str, ...]] = []
+    seen, broken = set(), 0
     for root in _search_roots():
         for dataset_id, data_dir in _scan(root).items():
             if dataset_id in seen:
@@ -56,7 +58,7 @@ def list_datasets(check: bool) -> int:
                 rows.append((dataset_id, "?", "?", f"unreadable metadata: {error}", "", "", str(root)))
                 broken += 1
                 continue
-            row = (
+            row: tuple[str, ...] = (
                 dataset_id,
                 str(meta.get("total_steps", "?")),
                 str(meta.get("total_episodes", "?")),

@@ -21,7 +21,7 @@ import json
 import os
 import pathlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -49,7 +49,7 @@ def _digest_tensors(tensors: list[tuple[str, th.Tensor]]) -> str:
     return digest.hexdigest()
 
 
-def data_fingerprint(dataset_fingerprint: str | None, arrays: list[th.Tensor | np.ndarray]) -> str:
+def data_fingerprint(dataset_fingerprint: str | None, arrays: Sequence[th.Tensor | np.ndarray]) -> str:
     """The data's part of the key: the dataset's content fingerprint, or (a dataset made in memory) a hash of the
     arrays the fit reads.
 
@@ -154,7 +154,7 @@ def fit_or_load(
             "rng": {k: _encode(v) for k, v in _rng_states(device).items()},
             **about,
         }
-        write_atomically(sidecar, lambda tmp: tmp.write_text(json.dumps(meta)))
+        write_atomically(sidecar, lambda tmp: (tmp.write_text(json.dumps(meta)), None)[1])
     except OSError as error:
         print(f"could not keep the dynamics fit in {folder}: {error}")
     return info
