@@ -10,7 +10,6 @@ reduced set (fewer configurations, sizes and repetitions) as a smoke check. Runs
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import importlib
 import json
@@ -24,6 +23,7 @@ from typing import Any
 
 import torch as th
 
+from sb3_pola.common.arguments import ArgumentParser
 from sb3_pola.common.extras import missing_extra, missing_extra_message
 from sb3_pola.common.machine import cpu_name, gpu_name
 
@@ -275,7 +275,7 @@ def run_section(name: str, quick: bool, device: str, policy_kwargs: dict[str, An
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="sb3-pola bench", description=__doc__)
+    parser = ArgumentParser(prog="sb3-pola bench", description=__doc__)
     parser.add_argument(
         "--quick", action="store_true", help="reduced set (fewer configurations, sizes and repetitions): a smoke check"
     )

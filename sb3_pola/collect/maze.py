@@ -50,6 +50,7 @@ from gymnasium.envs.registration import EnvSpec
 
 from sb3_pola.collect.episodes import rollout, run_episodes
 from sb3_pola.collect.writer import MIN_REF_EPISODES, dataset_summary, datasets_root, write_dataset
+from sb3_pola.common.arguments import ArgumentParser
 from sb3_pola.common.extras import import_gymnasium_robotics, missing_extra_message
 
 KINDS = ("planner", "random")
@@ -212,7 +213,7 @@ def eval_env_spec(env_id: str, eval_steps: int | None) -> EnvSpec:
 
 
 def make_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="sb3-pola collect", description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--env", required=True, help="Gymnasium-Robotics point maze id, e.g. PointMaze_UMaze-v3")

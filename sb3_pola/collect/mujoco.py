@@ -41,6 +41,7 @@ import numpy as np
 
 from sb3_pola.collect.episodes import PolicyFn, evaluate, policy_fn, progress_bar, rollout
 from sb3_pola.collect.writer import MIN_REF_EPISODES, dataset_summary, datasets_root, default_name, write_dataset
+from sb3_pola.common.arguments import ArgumentParser
 from sb3_pola.common.datasets import D4RL_KINDS
 
 KINDS = D4RL_KINDS
@@ -186,7 +187,7 @@ def replay_episodes(model: Any, end: int) -> list[Any]:
 
 
 def make_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="sb3-pola collect",
         description=__doc__.split("\n\n")[0],
         epilog="Point mazes have their own kinds and options: sb3-pola collect --env PointMaze_UMaze-v3 --help",
