@@ -129,3 +129,16 @@ def test_progress_bars_write_nothing_without_a_terminal(pendulum_path: str, caps
     model.learn(5, progress_bar=True)
     err = capsys.readouterr().err
     assert "\r" not in err and "\x1b[" not in err, repr(err[:200])
+
+
+def test_unseeded_models_reuse_any_fit_of_the_data(pendulum_path: str, monkeypatch) -> None:
+    """seed=None (torch starts each process from another random state): the fit is reused all the same."""
+    calls = count_fits(monkeypatch)
+    kwargs = light_kwargs(dynamics_fit_kwargs=FIT, seed=None)
+    first = POLA("MlpPolicy", dataset=pendulum_path, **kwargs)
+    first.learn(1)
+    th.manual_seed(1234)  # as another process would start
+    second = POLA("MlpPolicy", dataset=pendulum_path, **kwargs)
+    second.learn(1)
+    assert calls == [1] and second.dynamics_fit_info["cached"] == 1.0
+    assert digest(second.policy.dynamics) == digest(first.policy.dynamics)

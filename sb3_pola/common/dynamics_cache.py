@@ -10,7 +10,9 @@ The key is everything the fitted model depends on: the dataset's content (its fi
 and initial weights, the fit's arguments, torch's random state when the fit starts (the seed and what the model's
 construction drew before it), the device type and torch's version. A hit is therefore the model a fit would give, bit
 for bit; it also restores the random state the fit would have left, so that training after a hit is the training after
-a fit, bit for bit (on CPU).
+a fit, bit for bit (on CPU). A model without a seed (``seed=None``: torch starts every process from another random
+state) has no result to reproduce: its key leaves the initial weights and the random state out, so that any fit of the
+same data, configuration and fit arguments is reused, and the random state is left as it is.
 """
 
 from __future__ import annotations
@@ -69,13 +71,17 @@ def _rng_states(device: th.device) -> dict[str, th.Tensor]:
     return states
 
 
-def cache_key(model: EnsembleDynamics, data_key: str, fit_kwargs: dict[str, Any], device: th.device) -> str:
+def cache_key(
+    model: EnsembleDynamics, data_key: str, fit_kwargs: dict[str, Any], device: th.device, exact: bool = True
+) -> str:
     """The key of a fit: see the module's docstring. Read before the fit (initial weights, random state).
 
     :param model: the model about to be fitted
     :param data_key: :func:`data_fingerprint`
     :param fit_kwargs: the fit's arguments (those that change its result)
     :param device: where it is fitted
+    :param exact: include the initial weights and the random state (a seeded model); ``False``: any fit of the data
+        and configuration
     :return: a hex digest
     """
     config = {
@@ -89,8 +95,8 @@ def cache_key(model: EnsembleDynamics, data_key: str, fit_kwargs: dict[str, Any]
         }
         | {"weight_decays": list(model.weight_decays)},
         "fit": {key: fit_kwargs[key] for key in sorted(fit_kwargs)},
-        "weights": _digest_tensors(sorted(model.state_dict().items())),
-        "rng": _digest_tensors(sorted(_rng_states(device).items())),
+        "weights": _digest_tensors(sorted(model.state_dict().items())) if exact else "any",
+        "rng": _digest_tensors(sorted(_rng_states(device).items())) if exact else "any",
     }
     return hashlib.sha256(json.dumps(config, sort_keys=True, default=str).encode()).hexdigest()
 
@@ -110,6 +116,7 @@ def fit_or_load(
     about: dict[str, Any],
     use_cache: bool = True,
     verbose: int = 0,
+    restore_rng: bool = True,
 ) -> dict[str, float]:
     """Load the fit of ``key`` from the cache, or run ``fit`` and keep its result there.
 
@@ -119,6 +126,7 @@ def fit_or_load(
     :param about: what the sidecar records besides (``dataset_id``, ``source``)
     :param use_cache: ``False``: fit, and keep nothing
     :param verbose: 1: a line saying the fit was loaded
+    :param restore_rng: on a hit, set torch's random state to the one the fit left (an exact key)
     :return: the fit's metrics (``cached`` = 1 on a hit, ``fit_time`` then the time the load took)
     """
     if not use_cache:
@@ -134,9 +142,10 @@ def fit_or_load(
             meta = json.loads(open(sidecar).read())
             if meta.get("key") == key:
                 load_module_state(model, weights, device)
-                th.set_rng_state(_decode(meta["rng"]["cpu"]))
-                if "cuda" in meta["rng"] and device.type == "cuda":
-                    th.cuda.set_rng_state(_decode(meta["rng"]["cuda"]), device)
+                if restore_rng:
+                    th.set_rng_state(_decode(meta["rng"]["cpu"]))
+                    if "cuda" in meta["rng"] and device.type == "cuda":
+                        th.cuda.set_rng_state(_decode(meta["rng"]["cuda"]), device)
                 os.utime(sidecar)  # last use, for `sb3-pola datasets --cache`
                 info = {k: float(v) for k, v in meta["fit_info"].items()}
                 info.update(cached=1.0, fit_time=time.perf_counter() - start)

@@ -235,8 +235,8 @@ class POLA(OfflineAlgorithm):
     :param dynamics_cache: keep the fitted dynamics model in the user's cache (``$SB3_POLA_CACHE_DIR/dynamics``, else
         ``~/.cache/sb3_pola/dynamics``) and reuse it: a later ``learn`` on the same dataset content, dynamics
         configuration, fit arguments and seed loads it instead of fitting again, and trains exactly as after the fit
-        (the random state the fit leaves is restored; :mod:`~sb3_pola.common.dynamics_cache`). ``False``: always fit,
-        keep nothing
+        (the random state the fit leaves is restored; :mod:`~sb3_pola.common.dynamics_cache`); without a seed, any
+        kept fit of the same data and configuration is loaded. ``False``: always fit, keep nothing
     :param compile_update: compile the critic and actor losses (forward and backward) with ``torch.compile``
         for the static shapes of training, and on CUDA capture them as CUDA graphs (the GPU speed path).
         The first gradient step compiles (one to three minutes on a small CPU); random draws match eager
@@ -483,13 +483,14 @@ class POLA(OfflineAlgorithm):
         arrays = [buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones]
         data_key = data_fingerprint(data.fingerprint if data is not None else None, arrays)
         result_kwargs = {k: v for k, v in fit_kwargs.items() if k not in ("progress_bar", "logger", "verbose")}
-        key = cache_key(dynamics, data_key, result_kwargs, self.device)
+        exact = self.seed is not None  # seed=None: any fit of this data and configuration will do
+        key = cache_key(dynamics, data_key, result_kwargs, self.device, exact=exact)
         source = data.metadata.get("source") if data is not None else None
         about = {
             "dataset_id": data.dataset_id if data is not None else None,
             "source": source or _dataset_source(self.dataset),
         }
-        return fit_or_load(dynamics, fit, key, about, verbose=self.verbose)
+        return fit_or_load(dynamics, fit, key, about, verbose=self.verbose, restore_rng=exact)
 
     # ------------------------------------------------------------------ one gradient step
     def train(self, gradient_steps: int, batch_size: int = 256) -> None:
