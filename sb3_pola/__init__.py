@@ -1,7 +1,7 @@
-import os
+import pathlib
 
 from sb3_pola.pola import PAPER_FORM, POLA, MlpPolicy, POLAPolicy
 
-__version__ = open(os.path.join(os.path.dirname(__file__), "version.txt")).read().strip()
+__version__ = (pathlib.Path(__file__).parent / "version.txt").read_text().strip()
 
 __all__ = ["PAPER_FORM", "POLA", "MlpPolicy", "POLAPolicy", "__version__"]

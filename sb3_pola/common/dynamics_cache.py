@@ -139,7 +139,7 @@ def fit_or_load(
     start = time.perf_counter()
     if os.path.isfile(weights) and os.path.isfile(sidecar):
         try:
-            meta = json.loads(open(sidecar).read())
+            meta = json.loads(pathlib.Path(sidecar).read_text())
             if meta.get("key") == key:
                 load_module_state(model, weights, device)
                 if restore_rng:
@@ -184,7 +184,7 @@ def dynamics_entries() -> list[dict[str, Any]]:
         weights = os.path.join(folder, file)
         sidecar = os.path.splitext(weights)[0] + ".json"
         try:
-            meta = json.loads(open(sidecar).read())
+            meta = json.loads(pathlib.Path(sidecar).read_text())
         except (OSError, ValueError):
             meta = {}
         source = meta.get("source")
