@@ -8,6 +8,7 @@ import torch as th
 
 from sb3_pola import collect
 from sb3_pola.common.datasets import load_offline_dataset
+from sb3_pola.common.errors import UsageError
 
 
 def test_random_with_given_refs(tmp_path, monkeypatch):
@@ -69,5 +70,5 @@ def _sac_path_all_kinds(tmp_path, monkeypatch):
 def test_bad_arguments(tmp_path):
     assert collect.main(["--env", "Pendulum-v1", "--ref-episodes", "3", "--out", str(tmp_path)]) == 2
     assert collect.main(["--env", "CartPole-v1", "--kind", "random", "--out", str(tmp_path)]) == 2
-    with pytest.raises(SystemExit):
+    with pytest.raises(UsageError, match="argument --kind: invalid choice"):  # sb3-pola prints it as one line
         collect.main(["--env", "Pendulum-v1", "--kind", "bogus"])

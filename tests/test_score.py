@@ -12,6 +12,7 @@ import pytest
 from helpers import TINY_GRID
 
 from sb3_pola.cli import score as score_cli
+from sb3_pola.common.errors import UsageError
 from sb3_pola.grid import cell as grid_cell
 from sb3_pola.grid import diagnostics
 from sb3_pola.grid import reevaluate as reeval
@@ -148,7 +149,7 @@ def test_presets_and_overrides() -> None:
     paper = grid_variants.build_config(score_cli.parse_args([]), "cuda")
     assert (paper.preset, paper.n_critics, paper.net_arch, paper.batch_size) == ("paper", 10, [256, 256, 256], 256)
     assert cpu.signature() != grid_variants.build_config(score_cli.parse_args(["--steps", "51"]), "cpu").signature()
-    with pytest.raises(SystemExit):
+    with pytest.raises(UsageError, match="argument --variants: invalid choice"):
         score_cli.parse_args(["--variants", "T7"])
 
 

@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
         entry: dict[str, Any] = {"fit": info, "fit_s": time.perf_counter() - start}
         entry["dataset_actions"] = model_check.open_loop_errors(model, data, starts, args.horizon)
         if policy_model is not None:
-            env = make_env(data)
+            env = make_env(data, monitor=False)  # rollouts set the simulator state: no episode bookkeeping
             entry["policy_actions"] = model_check.policy_rollout_errors(model, policy_model, env, data, starts, args.horizon)
             env.close()
         results["fits"][mean_loss] = entry

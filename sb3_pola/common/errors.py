@@ -18,7 +18,7 @@ class HyperparameterError(UserError, ValueError):
     """A constructor argument out of its range; the message names the public argument and the allowed values."""
 
 
-class UsageError(UserError):
+class UsageError(UserError, ValueError):
     """A command-line argument that cannot be used (out of range, wrong file extension...)."""
 
 

@@ -93,7 +93,7 @@ def import_gymnasium_robotics() -> Any:
     :return: the module
     :raises ImportError: it is not installed
     """
-    if "gymnasium_robotics" in sys.modules:
+    if sys.modules.get("gymnasium_robotics") is not None:
         return sys.modules["gymnasium_robotics"]
     captured = io.StringIO()
     with contextlib.redirect_stderr(captured):
