@@ -40,16 +40,25 @@ class OfflineProgressBarCallback(ProgressBarCallback):
     (a log file).
     """
 
-    def _on_training_start(self) -> None:
-        from tqdm.auto import tqdm
+    pbar: Any
 
-        self.pbar = tqdm(
-            total=self.locals["total_timesteps"] - self.model.num_timesteps, desc="training", unit="step", disable=None
-        )
+    def _on_training_start(self) -> None:
+        # the bar opens at the first step, after the work before training (the dynamics fit, its own bar and summary)
+        self.pbar = None
+        self._total = self.locals["total_timesteps"] - self.model.num_timesteps
 
     def _on_step(self) -> bool:
+        if self.pbar is None:
+            from tqdm.auto import tqdm
+
+            self.pbar = tqdm(total=self._total, desc="training", unit="step", disable=None)
         self.pbar.update(1)
         return True
+
+    def _on_training_end(self) -> None:
+        if self.pbar is not None:
+            self.pbar.refresh()
+            self.pbar.close()
 
 
 def dataset_reference(dataset: DatasetLocation | OfflineDataset | None) -> str | None:
