@@ -32,6 +32,11 @@ for s in $SEEDS; do
   "$PY" -m sb3_pola.cli run --seed "$s" --steps 6000 --out "$OUT/mainjob_x0/s$s" \
     --extra '{"lookahead_normalization": "first", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false}'
 done
+# evening screen: the Q term at eta without the floor ("weights", no floor) on HalfCheetah medium and the pendulum
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name W1 \
+  --rules obsnoise,noisefree --kwargs "{$ACTOR, \"q_scale_floor\": null}"
+"$PY" -m sb3_pola.cli run --seed 0 --steps 6000 --out "$OUT/mainjob_weights/s0" \
+  --extra '{"lookahead_normalization": "weights", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false}'
 # the dynamics fit under the three mean losses
 "$PY" -m sb3_pola.cli model-check --dataset invertedpendulum/medium-v0 --max-steps 4000 --out "$OUT/model_check_ip.json"
 # speed: the defaults beside the paper's form
