@@ -37,6 +37,8 @@ done
   --rules obsnoise,noisefree --kwargs "{$ACTOR, \"q_scale_floor\": null}"
 "$PY" -m sb3_pola.cli run --seed 0 --steps 6000 --out "$OUT/mainjob_weights/s0" \
   --extra '{"lookahead_normalization": "weights", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false}'
+# the pendulum's model at the paper's Q strength under the three rules
+"$PY" experiments/policy_quality/rules.py "$OUT/mainjob_x0/s0/model.zip" invertedpendulum/medium-v0
 # the dynamics fit under the three mean losses
 "$PY" -m sb3_pola.cli model-check --dataset invertedpendulum/medium-v0 --max-steps 4000 --out "$OUT/model_check_ip.json"
 # speed: the defaults beside the paper's form
