@@ -37,6 +37,11 @@ done
   --rules obsnoise,noisefree --kwargs "{$ACTOR, \"q_scale_floor\": null}"
 "$PY" -m sb3_pola.cli run --seed 0 --steps 6000 --out "$OUT/mainjob_weights/s0" \
   --extra '{"lookahead_normalization": "weights", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false}'
+# half the paper's strength on the pendulum (eta 0.5) and on HalfCheetah medium (H1)
+"$PY" -m sb3_pola.cli run --seed 0 --steps 6000 --out "$OUT/mainjob_half/s0" \
+  --extra '{"prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false, "eta": 0.5}'
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name H1 \
+  --rules noisefree,obsnoise --kwargs "{$ACTOR, \"q_scale_floor\": null, \"lookahead_normalization\": \"first\", \"eta\": 0.5}"
 # the pendulum's model at the paper's Q strength under the three rules
 "$PY" experiments/policy_quality/rules.py "$OUT/mainjob_x0/s0/model.zip" invertedpendulum/medium-v0
 # the dynamics fit under the three mean losses
