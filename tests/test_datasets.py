@@ -28,6 +28,7 @@ from sb3_pola.common.datasets import (
     load_offline_dataset,
     make_env,
     normalized_score,
+    synthetic_dataset,
 )
 
 N_STEPS = sum(length for length, _ in EPISODES)
@@ -427,3 +428,14 @@ def test_maze_env_without_the_adroit_notice():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert result.returncode == 0, result.stderr
     assert "Adroit" not in result.stderr
+
+
+def test_returns_to_go_restart_at_terminations_and_truncations():
+    data = synthetic_dataset(5, 1, 1)
+    # two episodes: steps 0-2 truncated (the next transition does not continue it), steps 3-4 terminated
+    data.observations = np.array([[0.0], [1.0], [2.0], [10.0], [11.0]], dtype=np.float32)
+    data.next_observations = np.array([[1.0], [2.0], [3.0], [11.0], [12.0]], dtype=np.float32)
+    data.rewards = np.array([1.0, 2.0, 4.0, 1.0, 1.0], dtype=np.float32)
+    data.dones = np.array([0.0, 0.0, 0.0, 0.0, 1.0], dtype=np.float32)
+    assert data.episode_ends().tolist() == [False, False, True, False, True]
+    np.testing.assert_allclose(data.returns_to_go(0.5), [1 + 0.5 * 2 + 0.25 * 4, 2 + 0.5 * 4, 4, 1.5, 1.0])

@@ -305,3 +305,22 @@ def test_exported_graph_follows_the_deterministic_rule(rule, tmp_path):
     obs = np.random.default_rng(1).normal(size=(9, 3)).astype(np.float32)
     actions, _ = model.predict(obs, deterministic=True)
     assert np.allclose(graph(th.as_tensor(obs)).numpy(), actions, atol=1e-5)
+
+
+# ---------------------------------------------------------------- the Q term gated by the critic's maturity
+def test_critic_maturity_gate_scales_eta_by_q_at_the_data_over_the_data_value():
+    data = synthetic_dataset(400, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(rollout_length=1, eta_gate="critic_maturity"))
+    model._before_training()
+    assert model.data_value == pytest.approx(float(data.returns_to_go(model.gamma).mean()))
+    stats = model._update(model._setup_offline_data().sample(32))
+    expected = float((stats["q_mean"] / model.data_value).clamp(0.0, 1.0))
+    assert float(stats["critic_maturity"]) == pytest.approx(expected)
+    assert float(stats["eta"]) == pytest.approx(expected * float(model.eta))
+    # a critic far below the data's value: the Q term is closed and the actor's loss is the imitation loss alone
+    model.data_value = 1e9
+    stats = model._update(model._setup_offline_data().sample(32))
+    assert float(stats["eta"]) == pytest.approx(0.0, abs=1e-6)
+    assert float(stats["actor_loss"]) == pytest.approx(float(stats["bc_loss"]), rel=1e-5)
+    with pytest.raises(ValueError, match="eta_gate"):
+        model_on_dataset(data, **light(eta_gate="maturity"))

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 import torch as th
+from stable_baselines3.common.logger import configure
 
 from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset, make_env
@@ -73,6 +74,8 @@ def main() -> None:
         if model.policy.dynamics is not None and shared and dynamics.exists():
             model.policy.dynamics.load_state_dict(th.load(dynamics))
             model.policy.dynamics_fitted.fill_(True)
+        # train/ statistics (critic_maturity, q_mean, ...) in OUT/<dataset>/<name>/seed<S>/progress.csv
+        model.set_logger(configure(str(folder / args.name / f"seed{args.seed}"), ["csv"]))
         model.learn(args.steps)
         if model.policy.dynamics is not None and shared and not dynamics.exists():
             th.save(model.policy.dynamics.state_dict(), dynamics)

@@ -2,7 +2,8 @@
 
 Prints one table (dataset, gradient steps, wall time, steps/s, mean return, normalised score, the
 success rate where the env reports one (the mazes), the dataset's own average return) and writes
-``model.zip``, ``learning_curve.png``, ``results.json`` and ``evaluations.npz`` into ``--out``.
+``model.zip``, ``learning_curve.png``, ``results.json``, ``evaluations.npz`` and ``progress.csv`` (the train/
+statistics) into ``--out``.
 """
 
 from __future__ import annotations
@@ -129,6 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     import torch as th
     from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from sb3_pola import POLA
@@ -151,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     model = POLA("MlpPolicy", dataset=args.dataset, seed=args.seed, device=args.device, **hyperparameters)
     out.mkdir(parents=True, exist_ok=True)  # after the dataset and the arguments are known to be usable
+    model.set_logger(configure(str(out), ["csv"]))  # the train/ and eval/ statistics in OUT/progress.csv
     eval_env = DummyVecEnv([lambda: make_env(data)])  # make_env wraps it with a Monitor
     eval_env.seed(args.seed + 1000)
 
@@ -254,7 +257,13 @@ def main(argv: list[str] | None = None) -> int:
     ]
     width = max(len(k) for k, _ in rows)
     print("\n" + "\n".join(f"{k:<{width}} | {v}" for k, v in rows))
-    written = [out / "model.zip", out / "learning_curve.png", out / "results.json", out / "evaluations.npz"]
+    written = [
+        out / "model.zip",
+        out / "learning_curve.png",
+        out / "results.json",
+        out / "evaluations.npz",
+        out / "progress.csv",
+    ]
     print(f"\nsaved: {', '.join(str(path) for path in written if path.exists())}")
     return 0
 

@@ -168,6 +168,32 @@ class OfflineDataset:
         std = np.maximum(np.sqrt(sq / n), eps)
         return mean.astype(np.float32), std.astype(np.float32)
 
+    def episode_ends(self) -> np.ndarray:
+        """``[N]`` bool, True at the last transition of each episode: a termination, or where the next transition
+        does not start at this one's next observation (a truncation, or the end of the arrays)."""
+        ends = self.dones.astype(bool).copy()
+        if len(self):
+            ends[:-1] |= np.any(self.next_observations[:-1] != self.observations[1:], axis=1)
+            ends[-1] = True
+        return ends
+
+    def returns_to_go(self, gamma: float) -> np.ndarray:
+        """``[N]`` float64 discounted return from each transition to its episode's end, ``sum_k gamma^k r_{t+k}``.
+
+        A truncated episode's last states count no reward after the cut, so they read low; for a dataset-wide
+        value scale the mean over all transitions is what counts.
+
+        :param gamma: discount factor
+        """
+        rewards = self.rewards.astype(np.float64)
+        ends = self.episode_ends()
+        out = np.empty_like(rewards)
+        running = 0.0
+        for i in range(len(rewards) - 1, -1, -1):
+            running = rewards[i] + (0.0 if ends[i] else gamma * running)
+            out[i] = running
+        return out
+
     def normalized_score(self, returns: float | Sequence[float] | np.ndarray) -> float | None:
         """Normalised score (D4RL, x100) of the mean of ``returns`` with this dataset's reference scores.
 

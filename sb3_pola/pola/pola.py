@@ -43,6 +43,7 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
 
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
+ETA_GATES = (None, "critic_maturity")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
 DEFAULT_LEARNING_RATE = cosine_schedule(1e-3)  # Diffusion-QL's cosine decay; the imitation screens of #23
 GRADIENT_RATIO_FREQ = 100  # gradient steps between two measurements of train/q_bc_grad_ratio
@@ -84,6 +85,7 @@ def check_pola_arguments(
     lookahead_uncertainty_penalty: float,
     lookahead_uncertainty_cutoff: float | None,
     lcb_coef: float | None,
+    eta_gate: str | None,
     n_diffusion_steps: int,
     beta_schedule: str,
     prediction_type: str,
@@ -122,6 +124,7 @@ def check_pola_arguments(
     check_float("lcb_coef", lcb_coef, low=0.0, optional=True)
     if lcb_coef is not None and n_critics < 2:
         raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
+    check_choice("eta_gate", eta_gate, ETA_GATES)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
     check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
     check_choice("prediction_type", prediction_type, PREDICTION_TYPES)
@@ -279,6 +282,7 @@ class POLA(OfflineAlgorithm):
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
         lcb_coef: float | None = None,
+        eta_gate: str | None = None,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -314,6 +318,7 @@ class POLA(OfflineAlgorithm):
             lookahead_uncertainty_penalty=lookahead_uncertainty_penalty,
             lookahead_uncertainty_cutoff=lookahead_uncertainty_cutoff,
             lcb_coef=lcb_coef,
+            eta_gate=eta_gate,
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             prediction_type=prediction_type,
@@ -353,6 +358,9 @@ class POLA(OfflineAlgorithm):
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
         self.lookahead_uncertainty_cutoff = lookahead_uncertainty_cutoff
         self.lcb_coef = lcb_coef
+        self.eta_gate = eta_gate
+        # "critic_maturity": the dataset's mean discounted return-to-go, set once the data are loaded
+        self.data_value: float | None = None
         self.backprop_through_model = backprop_through_model
         self.n_diffusion_steps = n_diffusion_steps
         self.beta_schedule = beta_schedule
@@ -445,6 +453,10 @@ class POLA(OfflineAlgorithm):
         if self.q_scale_floor_value is None:  # "auto": the value scale of the dataset's rewards
             rewards = self._setup_offline_data().rewards
             self.q_scale_floor_value = float(rewards.abs().mean()) / (1.0 - self.gamma)
+        if self.eta_gate == "critic_maturity" and self.data_value is None:
+            self._setup_offline_data()
+            assert self._offline_data is not None
+            self.data_value = float(self._offline_data.returns_to_go(self.gamma).mean())
         dynamics = self.policy.dynamics
         if dynamics is None:
             return
@@ -515,6 +527,11 @@ class POLA(OfflineAlgorithm):
 
         # actor: L_d + eta L_q (eq. 6, eq. 4), the critic fixed
         self._eta_value.fill_(float(self.eta_schedule(self._current_progress_remaining)))
+        if self.eta_gate == "critic_maturity" and self.data_value:
+            # the Q term opens as the critic learns the data's own value: Q at the data over the mean return-to-go
+            maturity = (critic_stats["q_mean"] / self.data_value).clamp(0.0, 1.0)
+            self._eta_value.mul_(maturity)
+            critic_stats["critic_maturity"] = maturity
         with self._critic_frozen():
             actor_loss, actor_stats = self._actor_loss_fn(obs, actions, self._eta_value)
         self.actor.optimizer.zero_grad(set_to_none=True)
