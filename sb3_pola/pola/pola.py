@@ -217,6 +217,10 @@ class POLA(OfflineAlgorithm):
         this value contribute no Q term, and neither do later ones (as a terminal state). ``None``: off
     :param lcb_coef: ``k`` of a lower confidence bound ``mean - k std`` over the ensemble used in the policy loss
         in place of the mean of the ``top_k`` smallest members (:func:`lookahead_q_objective`). ``None``: top-K
+    :param eta_gate: ``"critic_maturity"``: each step's ``eta`` is multiplied by ``clip(Q / G, 0, 1)``, ``Q`` the
+        ensemble's mean at the batch's data and ``G`` the dataset's mean discounted return-to-go
+        (:meth:`~sb3_pola.common.datasets.OfflineDataset.returns_to_go`): the Q term opens as the critic learns the
+        data's own value (logged as ``train/critic_maturity``). ``None`` (default): ``eta`` as given
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False`` (default):
         look-ahead states are detached, so each Q term only trains the action taken at its state: the actor
