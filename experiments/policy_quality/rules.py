@@ -1,6 +1,6 @@
 """Evaluate a saved POLA model under several rules of ``predict`` (issue #23's evaluation-rule comparison).
 
-    python experiments/policy_quality/rules.py MODEL.zip DATASET [--rules noisefree,obsnoise,sample] [--episodes 10]
+    python experiments/policy_quality/rules.py MODEL.zip DATASET [--rules noisefree,obsnoise,sample,best10] [--episodes 10]
 
 Prints one line per rule: the mean and std of the returns (the score protocol's resets: episode ``i`` of seed ``S``
 resets with ``10000 (S + 1) + i``).
@@ -21,6 +21,8 @@ RULES = {
     "noisefree": (1, True, "noise_free"),
     "obsnoise": (1, True, "observation_noise"),
     "sample": (1, False, "observation_noise"),
+    # the Q-ranked choice: the noise-free chain and 9 seeded samples, the best by the pessimistic critic
+    "best10": (10, True, "noise_free"),
 }
 
 
