@@ -319,13 +319,32 @@ def test_main_job_keeps_the_papers_form():
     """The shipped InvertedPendulum main job needs the paper's strong, early Q term (docs/results.md)."""
     from sb3_pola.cli.run import CONFIGS
 
-    for config in CONFIGS.values():
+    for config in (CONFIGS["light"], CONFIGS["paper"]):
         assert {key: config[key] for key in PAPER_FORM if key != "learning_rate"} == {
             key: value for key, value in PAPER_FORM.items() if key != "learning_rate"
         }
     assert CONFIGS["light"]["learning_rate"] == 1e-3  # the light job's own, as measured
     # the pole needs the chain's mean: the light job evaluates with the noise-free rule
     assert CONFIGS["light"]["policy_kwargs"]["deterministic_rule"] == "noise_free"
+
+
+def test_run_config_defaults_is_the_package_defaults_at_the_light_sizes(pendulum_path):
+    """``sb3-pola run --config defaults`` (#23): the light job's sizes and budgets, every algorithmic choice the
+    package's default, so that the main job can be run with the defaults side by side with its own configuration."""
+    from sb3_pola.cli.run import CONFIGS, LIGHT_SIZES
+
+    defaults = CONFIGS["defaults"]
+    assert defaults is LIGHT_SIZES
+    assert not set(defaults) & (set(PAPER_FORM) | {"lcb_coef", "eta", "eta_gate"})
+    assert set(defaults["policy_kwargs"]) == {"net_arch"}
+    assert "mean_loss" not in defaults["dynamics_kwargs"]
+    # the light job is these sizes plus its own algorithmic choices
+    light = CONFIGS["light"]
+    for key, value in defaults.items():
+        if isinstance(value, dict):
+            assert value.items() <= light[key].items(), key
+        else:
+            assert light[key] == value, key
 
 
 @pytest.mark.parametrize("compile_activations", [False, True])
