@@ -114,6 +114,30 @@ def test_critic_layer_norm_reaches_the_ensemble_and_survives_save_load(tmp_path)
     assert th.equal(loaded.critic(obs, act), model.critic(obs, act))
 
 
+def test_critic_layer_norm_argument_sets_the_policy_and_files_without_it_load_plain(tmp_path):
+    """``POLA(critic_layer_norm=...)`` reaches the critics through ``policy_kwargs`` (which take precedence); a model
+    file saved before the argument existed has no such key and loads with plain critics."""
+    from sb3_pola import POLA
+
+    data = synthetic_dataset(300, 3, 2, seed=0)
+    on = model_on_dataset(data, **light(rollout_length=0, critic_layer_norm=True))
+    assert on.critic_layer_norm and on.policy.critic_layer_norm
+    assert any(isinstance(m, th.nn.LayerNorm) for m in on.critic.q_net)
+    off = model_on_dataset(data, **light(rollout_length=0, critic_layer_norm=False))
+    assert not off.critic_layer_norm and not any(isinstance(m, th.nn.LayerNorm) for m in off.critic.q_net)
+    given = light(rollout_length=0, critic_layer_norm=False, policy_kwargs=dict(net_arch=[32, 32], critic_layer_norm=True))
+    assert model_on_dataset(data, **given).critic_layer_norm
+    with pytest.raises(ValueError, match="critic_layer_norm"):
+        model_on_dataset(data, **light(critic_layer_norm="yes"))
+    # an old file: policy_kwargs without the key
+    del off.policy_kwargs["critic_layer_norm"]
+    off.save(tmp_path / "old.zip")
+    loaded = POLA.load(tmp_path / "old.zip")
+    assert not loaded.critic_layer_norm and not loaded.policy.critic_layer_norm
+    obs, act = th.randn(5, 3), th.rand(5, 2) * 2 - 1
+    assert th.equal(loaded.critic(obs, act), off.critic(obs, act))
+
+
 # ---------------------------------------------------------------- lower confidence bound
 def test_lcb_replaces_the_top_k_mean():
     q = th.tensor([[[1.0, 4.0]], [[3.0, 4.0]], [[5.0, 4.0]]])  # [N=3, T+1=1, B=2]

@@ -45,6 +45,7 @@ BAD_ARGUMENTS: list[tuple[dict[str, Any], str]] = [
     ({"lookahead_uncertainty_penalty": -0.5}, "lookahead_uncertainty_penalty must be"),
     ({"lookahead_uncertainty_cutoff": 0.0}, "lookahead_uncertainty_cutoff must be None or a number > 0.0"),
     ({"lcb_coef": -1.0}, "lcb_coef must be None or a number >= 0.0"),
+    ({"critic_layer_norm": "yes"}, "critic_layer_norm must be one of False, True"),
     ({"max_grad_norm": 0.0}, "max_grad_norm must be None or a number > 0.0"),
     ({"ema_decay": 1.5}, "ema_decay must be a number in [0.0, 1.0]"),
     ({"ema_update_freq": 0}, "ema_update_freq must be an int >= 1"),

@@ -85,6 +85,7 @@ def check_pola_arguments(
     lookahead_uncertainty_penalty: float,
     lookahead_uncertainty_cutoff: float | None,
     lcb_coef: float | None,
+    critic_layer_norm: bool,
     eta_gate: str | None,
     n_diffusion_steps: int,
     beta_schedule: str,
@@ -124,6 +125,7 @@ def check_pola_arguments(
     check_float("lcb_coef", lcb_coef, low=0.0, optional=True)
     if lcb_coef is not None and n_critics < 2:
         raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
+    check_choice("critic_layer_norm", critic_layer_norm, (False, True))
     check_choice("eta_gate", eta_gate, ETA_GATES)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
     check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
@@ -217,6 +219,9 @@ class POLA(OfflineAlgorithm):
         this value contribute no Q term, and neither do later ones (as a terminal state). ``None``: off
     :param lcb_coef: ``k`` of a lower confidence bound ``mean - k std`` over the ensemble used in the policy loss
         in place of the mean of the ``top_k`` smallest members (:func:`lookahead_q_objective`). ``None``: top-K
+    :param critic_layer_norm: LayerNorm in the critics' hidden layers (ReBRAC): it bounds Q off the data, so the Q term
+        can pull at the paper's strength without the actor climbing the critic's extrapolation. Passed to the policy
+        (a ``critic_layer_norm`` in ``policy_kwargs`` takes precedence). ``False``: plain MLP critics (the paper)
     :param eta_gate: ``"critic_maturity"``: each step's ``eta`` is multiplied by ``clip(Q / G, 0, 1)``, ``Q`` the
         ensemble's mean at the batch's data and ``G`` the dataset's mean discounted return-to-go
         (:meth:`~sb3_pola.common.datasets.OfflineDataset.returns_to_go`): the Q term opens as the critic learns the
@@ -286,6 +291,7 @@ class POLA(OfflineAlgorithm):
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
         lcb_coef: float | None = None,
+        critic_layer_norm: bool = False,
         eta_gate: str | None = None,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
@@ -322,6 +328,7 @@ class POLA(OfflineAlgorithm):
             lookahead_uncertainty_penalty=lookahead_uncertainty_penalty,
             lookahead_uncertainty_cutoff=lookahead_uncertainty_cutoff,
             lcb_coef=lcb_coef,
+            critic_layer_norm=critic_layer_norm,
             eta_gate=eta_gate,
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
@@ -379,6 +386,9 @@ class POLA(OfflineAlgorithm):
         self.dynamics_fit_info: dict[str, float] = {}
         self.dynamics_cache = dynamics_cache
         self.compile_update = compile_update
+        # the critics' LayerNorm is the policy's; policy_kwargs["critic_layer_norm"], if given, takes precedence, and
+        # a saved model keeps it in its policy_kwargs (a file from before this argument loads without it: False)
+        self.policy_kwargs = {"critic_layer_norm": critic_layer_norm, **self.policy_kwargs}
         if compile_update:  # Mish as one exp inside the compiled graph: inductor fuses it into a single kernel
             self.policy_kwargs = {"compile_activations": True, **self.policy_kwargs}
         if _init_setup_model:
@@ -432,6 +442,11 @@ class POLA(OfflineAlgorithm):
         self.actor = self.policy.actor
         self.critic = self.policy.critic
         self.critic_target = self.policy.critic_target
+
+    @property
+    def critic_layer_norm(self) -> bool:
+        """Whether the critics have LayerNorm (the policy's setting; ``False`` in a file saved before the argument)."""
+        return bool(self.policy_kwargs.get("critic_layer_norm", False))
 
     def _excluded_save_params(self) -> list[str]:
         return [
