@@ -298,11 +298,16 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "backprop_through_model": True,
         "prediction_type": "epsilon",
         "learning_rate": 3e-4,
+        "critic_layer_norm": False,
     }
+    # the Q term at the paper's strength, bounded by LayerNorm critics (#23; #12's weakened form stays an option)
+    shared = {"lookahead_normalization", "q_scale_floor"}
     for key, paper_value in PAPER_FORM.items():
         assert getattr(paper, key) == paper_value
-        assert getattr(default, key) != paper_value, key
-    assert (default.lookahead_normalization, default.q_scale_floor) == ("weights", "auto")
+        assert (getattr(default, key) == paper_value) == (key in shared), key
+    assert default.critic_layer_norm and default.policy.critic_layer_norm and not paper.policy.critic_layer_norm
+    assert any(isinstance(m, th.nn.LayerNorm) for m in default.critic.q_net)
+    assert not any(isinstance(m, th.nn.LayerNorm) for m in paper.critic.q_net)
     assert (default.critic_diversity, default.backprop_through_model) == (1.0, False)
     assert default.prediction_type == "sample" and default.actor.prediction_type == "sample"
     assert paper.actor.prediction_type == "epsilon"

@@ -22,7 +22,7 @@ BAD_ARGUMENTS: list[tuple[dict[str, Any], str]] = [
     ({"batch_size": 2.5}, "batch_size must be an int"),
     ({"gamma": 1.5}, "gamma must be a number in (0.0, 1.0], got 1.5"),
     ({"gamma": 0.0}, "gamma must be a number in (0.0, 1.0]"),
-    ({"gamma": 1.0}, "q_scale_floor='auto' needs gamma < 1"),
+    ({"gamma": 1.0, "q_scale_floor": "auto"}, "q_scale_floor='auto' needs gamma < 1"),
     ({"tau": 2}, "tau must be a number in (0.0, 1.0], got 2"),
     ({"tau": 0.0}, "tau must be"),
     ({"eta": -1}, "eta must be a number >= 0.0 or a schedule, got -1"),

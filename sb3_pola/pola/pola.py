@@ -57,6 +57,7 @@ PAPER_FORM: dict[str, Any] = {
     "backprop_through_model": True,
     "prediction_type": "epsilon",
     "learning_rate": 3e-4,
+    "critic_layer_norm": False,
 }
 
 
@@ -165,16 +166,18 @@ class POLA(OfflineAlgorithm):
     MuJoCo rule for the env, or the model's learned termination head when the env is unknown)
     marks terminal contribute no Q term, and neither do any states after them.
 
-    Six defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
-    ``lookahead_normalization="weights"`` and ``q_scale_floor="auto"`` (a Q term whose weight does not grow with
-    ``T`` and stays weak while the critic is immature: at the paper's strength it collapsed the locomotion actors
-    within a CPU budget), ``critic_diversity=1`` (EDAC's term: without it the ensemble agreed so closely that its
-    minimum was no pessimism), ``backprop_through_model=False`` (the actor steered the model into states the critic
-    overvalued), ``prediction_type="sample"`` (the actor regresses the clean action: it imitates as well as a plain
-    MSE regressor, the noise target did not) and a cosine learning rate from 1e-3. The dynamics model fits with
-    beta-NLL and ``predict(deterministic=True)`` draws one sample with the observation's own noise
+    Five defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
+    ``critic_layer_norm=True`` (LayerNorm critics, as ReBRAC: they bound Q off the data, so the Q term keeps the
+    paper's full strength, ``lookahead_normalization="first"`` and no floor, without the actor climbing the critic's
+    extrapolation; without them that strength collapsed the locomotion actors within a CPU budget),
+    ``critic_diversity=1`` (EDAC's term: without it the ensemble agreed so closely that its minimum was no
+    pessimism), ``backprop_through_model=False`` (the actor steered the model into states the critic overvalued),
+    ``prediction_type="sample"`` (the actor regresses the clean action: it imitates as well as a plain MSE
+    regressor, the noise target did not) and a cosine learning rate from 1e-3. The dynamics model fits with beta-NLL
+    and ``predict(deterministic=True)`` draws one sample with the observation's own noise
     (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``; the shipped
-    InvertedPendulum main job needs it (its Q term must pull hard and early), which the defaults do not give.
+    InvertedPendulum main job keeps it (with the defaults the pendulum needs the Q-ranked rule,
+    ``policy_kwargs=dict(n_action_samples=10)``, docs/results.md).
 
     :param policy: policy class or alias (``"MlpPolicy"``)
     :param env: env (or id) for evaluation callbacks; made from the dataset's metadata if ``None``
@@ -195,7 +198,7 @@ class POLA(OfflineAlgorithm):
         ``T`` (``sum_i gamma^i``, 3.94 at ``T = 3``); ``"weights"`` (default): also divided by
         ``sum_i gamma^i``, so ``eta`` weighs the Q term the same for every ``T``
     :param q_scale_floor: lower bound of the detached ``mean |Q|`` that divides the Q term. ``None``:
-        Diffusion-QL's batch mean alone (the paper). ``"auto"`` (default): the dataset's value scale
+        Diffusion-QL's batch mean alone (the paper; default). ``"auto"``: the dataset's value scale
         ``mean |r| / (1 - gamma)``,
         so while the critic is immature (``|Q|`` far below the returns it will reach) its gradient pulls
         the actor in proportion to how far it has learned, instead of at full strength from the first step.
@@ -221,7 +224,8 @@ class POLA(OfflineAlgorithm):
         in place of the mean of the ``top_k`` smallest members (:func:`lookahead_q_objective`). ``None``: top-K
     :param critic_layer_norm: LayerNorm in the critics' hidden layers (ReBRAC): it bounds Q off the data, so the Q term
         can pull at the paper's strength without the actor climbing the critic's extrapolation. Passed to the policy
-        (a ``critic_layer_norm`` in ``policy_kwargs`` takes precedence). ``False``: plain MLP critics (the paper)
+        (a ``critic_layer_norm`` in ``policy_kwargs`` takes precedence). Default ``True``; ``False``: plain MLP
+        critics (the paper)
     :param eta_gate: ``"critic_maturity"``: each step's ``eta`` is multiplied by ``clip(Q / G, 0, 1)``, ``Q`` the
         ensemble's mean at the batch's data and ``G`` the dataset's mean discounted return-to-go
         (:meth:`~sb3_pola.common.datasets.OfflineDataset.returns_to_go`): the Q term opens as the critic learns the
@@ -284,14 +288,14 @@ class POLA(OfflineAlgorithm):
         top_k: int = 2,
         rollout_length: int = 3,
         eta: float | Schedule = 1.0,
-        lookahead_normalization: str = "weights",
-        q_scale_floor: float | str | None = "auto",
+        lookahead_normalization: str = "first",
+        q_scale_floor: float | str | None = None,
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
         lcb_coef: float | None = None,
-        critic_layer_norm: bool = False,
+        critic_layer_norm: bool = True,
         eta_gate: str | None = None,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
