@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import pathlib
@@ -165,13 +166,37 @@ def test_compiled_activations_export_as_plain_mish(tiny_dataset, tmp_path: pathl
 
 
 # ---------------------------------------------------------------- what cannot be exported
-def test_refuses_ranked_candidates(tiny_dataset, tmp_path: pathlib.Path):
-    policy_kwargs = {"net_arch": [16], "n_action_samples": 4}
-    candidates = POLA("MlpPolicy", dataset=tiny_dataset, device="cpu", policy_kwargs=policy_kwargs)
-    for fmt in ("onnx", "torchscript"):
-        with pytest.raises(PolicyExportError, match="n_action_samples=4"):
-            candidates.export_policy(tmp_path / "policy", format=fmt)
-    assert not (tmp_path / "policy").exists()
+def test_ranked_candidates_export_with_the_critics_and_match_predict(tiny_dataset, tmp_path: pathlib.Path):
+    """The Q-ranked rule (``n_action_samples > 1``): the graph runs the candidates' chains and the target critics
+    (LayerNorm ones, the default, and plain ones) and keeps predict's choice, in both formats."""
+    observations = np.random.default_rng(0).normal(0.0, 2.0, (32, 3)).astype(np.float32)
+    for layer_norm in (True, False):
+        policy_kwargs = {"net_arch": [32, 32], "n_action_samples": 6}
+        model = POLA(
+            "MlpPolicy", dataset=tiny_dataset, seed=0, device="cpu", critic_layer_norm=layer_norm, policy_kwargs=policy_kwargs
+        )
+        _perturb(model, seed=4)
+        model.policy.actor_ema.load_state_dict(model.actor.state_dict())
+        with th.no_grad():  # critics that prefer different candidates at different states
+            for param in model.policy.critic_target.parameters():
+                param.add_(0.5 * th.randn(param.shape, generator=th.Generator().manual_seed(5)))
+        expected, _ = model.predict(observations, deterministic=True)
+        model.policy.n_action_samples = 1
+        noise_free = model.policy.deterministic_rule
+        model.policy.deterministic_rule = "noise_free"
+        first, _ = model.predict(observations, deterministic=True)  # candidate 0 alone
+        model.policy.n_action_samples, model.policy.deterministic_rule = 6, noise_free
+        assert not np.allclose(expected, first, atol=1e-4)  # the critics chose other candidates somewhere
+        graph = DeterministicPolicyGraph(model.policy)
+        assert graph.critic is not None and graph.candidate_noise.shape == (model.policy.n_diffusion_steps + 1, 6, 2)
+        scripted = th.jit.load(str(model.export_policy(tmp_path / f"ranked{layer_norm}.pt", format="torchscript")))
+        with th.no_grad():
+            np.testing.assert_allclose(scripted(th.as_tensor(observations)).numpy(), expected, rtol=0, atol=ATOL)
+        if layer_norm and importlib.util.find_spec("onnxruntime") is not None:  # one ONNX export: they are slow
+            path = model.export_policy(tmp_path / f"ranked{layer_norm}.onnx")
+            np.testing.assert_allclose(_session(path).run(None, {"obs": observations})[0], expected, rtol=0, atol=ATOL)
+            single = _session(path).run(None, {"obs": observations[:1]})[0]
+            np.testing.assert_allclose(single, expected[:1], rtol=0, atol=ATOL)
 
 
 def test_refuses_unknown_formats_and_overridden_predict(tiny_dataset, tmp_path: pathlib.Path):
@@ -235,11 +260,11 @@ def test_cli_export(tiny_dataset, tmp_path: pathlib.Path, capsys):
         scripted = th.jit.load(str(tmp_path / "policy.pt"))(th.as_tensor(obs)).numpy()
     np.testing.assert_allclose(scripted, expected, rtol=0, atol=ATOL)
 
-    policy_kwargs = {"net_arch": [16], "n_action_samples": 2}
-    POLA("MlpPolicy", dataset=tiny_dataset, device="cpu", policy_kwargs=policy_kwargs).save(tmp_path / "candidates.zip")
-    assert cli_main(["export", str(tmp_path / "candidates.zip"), str(tmp_path / "c.pt")]) == 2  # a user error: one line
+    # a user error is one line
+    assert cli_main(["export", str(tmp_path / "model.zip"), str(tmp_path / "y.txt")]) == 2
     err = capsys.readouterr().err
-    assert "n_action_samples=2" in err and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert "y.txt" in err and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "y.txt").exists()
 
 
 def test_export_bench_runs_and_tabulates():

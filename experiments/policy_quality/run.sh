@@ -10,7 +10,9 @@ PY="${PYTHON:-python}"
 OUT="${OUT:-outputs/policy_quality}"
 SEEDS="${SEEDS:-0}"
 mkdir -p "$OUT"
-ACTOR='"prediction_type": "sample", "lr_cos": 0.001'
+# until 2026-12-03 the defaults weakened the Q term ("weights", floor "auto") and had plain critics: the lines of
+# 2026-12-02 name those settings, so that they reproduce on today's defaults
+ACTOR='"prediction_type": "sample", "lr_cos": 0.001, "lookahead_normalization": "weights", "q_scale_floor": "auto", "critic_layer_norm": false'
 # the imitation screen: held-out action MSE
 for d in halfcheetah/medium-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
   "$PY" experiments/policy_quality/bc_screen.py --dataset "$d" >> "$OUT/bc_screen.jsonl"
@@ -48,3 +50,42 @@ done
 "$PY" -m sb3_pola.cli model-check --dataset invertedpendulum/medium-v0 --max-steps 4000 --out "$OUT/model_check_ip.json"
 # speed: the defaults beside the paper's form
 "$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" > "$OUT/bench_defaults_vs_paper.json"
+# ---- 2026-12-03: the Q term at the paper's strength with a lower confidence bound (D2), with its NLL fit (D3), with
+# LayerNorm critics (P1-LN, the new defaults); the pendulum at the light sizes with the package defaults
+# (`--config defaults`); every final pendulum model under three rules. P1 over the old defaults:
+P1X='"lookahead_normalization": "first", "q_scale_floor": null'
+ACTOR='"prediction_type": "sample", "lr_cos": 0.001'
+DYN='"dynamics_kwargs": {"n_members": 5, "n_elites": 3, "hidden_dim": 128, "n_layers": 3'
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-replay-v0 --seed 0 --name D2 \
+  --rules noisefree,obsnoise,sample,best10 --kwargs "{$ACTOR, $P1X, \"critic_layer_norm\": false, \"lcb_coef\": 2.0}"
+# the critic-maturity gate on HalfCheetah medium (G1) and the pendulum (the main job's configuration, x0, EDAC, detached)
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name G1 \
+  --rules obsnoise,noisefree --kwargs "{$ACTOR, $P1X, \"critic_layer_norm\": false, \"eta_gate\": \"critic_maturity\"}"
+XDB='"prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false'
+"$PY" -m sb3_pola.cli run --seed 0 --steps 6000 --out "$OUT/ipG/s0" --extra "{$XDB, \"eta_gate\": \"critic_maturity\"}"
+"$PY" experiments/policy_quality/rules.py "$OUT/ipG/s0/model.zip" invertedpendulum/medium-v0
+for s in 0 1 2; do  # the same with a lower confidence bound (ipL2)
+  "$PY" -m sb3_pola.cli run --seed "$s" --steps 6000 --out "$OUT/ipL2/s$s" --extra "{$XDB, \"lcb_coef\": 2.0}"
+done
+for s in 0 1 2; do
+  "$PY" -m sb3_pola.cli run --config defaults --seed "$s" --steps 6000 --out "$OUT/d2/s$s" \
+    --extra "{\"critic_layer_norm\": false, $P1X, \"lcb_coef\": 2.0}"
+  "$PY" experiments/policy_quality/rules.py "$OUT/d2/s$s/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
+  "$PY" experiments/policy_quality/rules.py "$OUT/ipL2/s$s/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
+done
+"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/d3/s0" \
+  --extra "{\"critic_layer_norm\": false, $P1X, \"lcb_coef\": 2.0, $DYN, \"mean_loss\": \"nll\"}}"
+"$PY" experiments/policy_quality/rules.py "$OUT/d3/s0/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
+# P1-LN: the new defaults (on the old defaults: P1 + critic_layer_norm)
+for s in 0 1; do
+  for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name P1-LN \
+      --rules noisefree,obsnoise,sample,best10 --kwargs "{$ACTOR}"
+  done
+done
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name P1-LN \
+  --rules noisefree,obsnoise,best10 --kwargs "{$ACTOR}"
+for s in 0 1 2; do
+  "$PY" -m sb3_pola.cli run --config defaults --seed "$s" --steps 6000 --out "$OUT/l1/s$s"
+  "$PY" experiments/policy_quality/rules.py "$OUT/l1/s$s/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
+done

@@ -4,7 +4,9 @@ The graph maps a batch of raw observations to the actions ``model.predict(obs, d
 returns: the state normalisation, the pairwise state products, the reverse chain of the predict actor (EMA or
 online) unrolled over its fixed number of steps, with the observation's own noise (``deterministic_rule=
 "observation_noise"``, the default) or none (``"noise_free"``), the clip to ``[-1, 1]`` and the rescaling to the
-action space's bounds. Input ``obs`` ``[batch, obs_dim]`` (float32), output
+action space's bounds. With ``n_action_samples > 1`` (the Q-ranked rule) the graph also holds the target critics:
+it runs the chain for the ``n`` candidates of ``predict`` (their fixed noise held as a buffer) and keeps the one
+with the highest minimum over the ensemble. Input ``obs`` ``[batch, obs_dim]`` (float32), output
 ``action`` ``[batch, action_dim]``, with a dynamic batch dimension.
 
 ``sb3-pola export MODEL.zip OUT [--format onnx|torchscript]``.
@@ -25,10 +27,11 @@ import torch as th
 from gymnasium import spaces
 from torch import nn
 
-from sb3_pola.common.activations import FusedMish, inference_mish
+from sb3_pola.common.activations import FusedMish, TwiceDifferentiableMish, inference_mish
 from sb3_pola.common.errors import UserError
 from sb3_pola.common.torch_layers import StateProductsExtractor
 from sb3_pola.pola.actor import DiffusionActor, noise_from_projection, observation_noise_projection
+from sb3_pola.pola.critic import EnsembleCritic
 from sb3_pola.pola.fast_sampling import InferencePlan, inference_plan, run_plan
 from sb3_pola.pola.policies import POLAPolicy
 
@@ -52,7 +55,7 @@ class DeterministicPolicyGraph(nn.Module):
     number of steps; only the activation differs (``nn.Mish`` for the eager in-place form). Built by
     :func:`export_policy`.
 
-    :param policy: the policy to reproduce (``n_action_samples=1``, finite action bounds)
+    :param policy: the policy to reproduce (finite action bounds)
     """
 
     obs_mean: th.Tensor
@@ -69,6 +72,7 @@ class DeterministicPolicyGraph(nn.Module):
     action_high: th.Tensor
     noise_projection: th.Tensor
     noise_offset: th.Tensor
+    candidate_noise: th.Tensor
 
     def __init__(self, policy: POLAPolicy) -> None:
         super().__init__()
@@ -98,8 +102,14 @@ class DeterministicPolicyGraph(nn.Module):
                     self.hidden_kinds.append("activation")
             self.activations = nn.ModuleList(activations).requires_grad_(False)
             self.register_buffer("step_bias", th.stack([bias_t.detach().clone() for _, bias_t, *_ in plan.steps]))
-            # deterministic_rule="observation_noise": the fixed projection of the observation's noise (float64)
-            self.observation_noise = policy.deterministic_rule == "observation_noise"
+            # n_action_samples > 1: the candidates' fixed chain noise [steps + 1, n, A] and the critics that rank them
+            self.n_candidates = policy.n_action_samples
+            self.critic: EnsembleCritic | None = None
+            if self.n_candidates > 1:
+                self.register_buffer("candidate_noise", policy.candidate_noise(actor).detach().cpu().float().clone())
+                self.critic = _exportable_critic(policy.critic_target)
+            # deterministic_rule="observation_noise" (one sample): the fixed projection of the observation's noise
+            self.observation_noise = self.n_candidates == 1 and policy.deterministic_rule == "observation_noise"
             if self.observation_noise:
                 projection, offset = observation_noise_projection(
                     extractor.obs_mean.shape[0], actor.n_diffusion_steps, actor.action_dim, policy.predict_seed
@@ -138,12 +148,38 @@ class DeterministicPolicyGraph(nn.Module):
         x = (obs.float() - self.obs_mean) / self.obs_std  # [B, n]
         if self.use_state_products:
             x = th.cat((x, x[:, self.idx_i] * x[:, self.idx_j]), dim=-1)  # [B, n + n(n-1)/2]
-        noise = None  # the noise-free chain from a_T = 0
-        if self.observation_noise:  # the observation's own chain noise, as predict draws it
-            noise = noise_from_projection(obs.float(), self.noise_projection, self.noise_offset, self.n_diffusion_steps)
-        action = run_plan(self.plan(), x, noise)  # clipped to [-1, 1]
+        if self.critic is not None:
+            action = self._best_candidate(obs.float(), x)
+        else:
+            noise = None  # the noise-free chain from a_T = 0
+            if self.observation_noise:  # the observation's own chain noise, as predict draws it
+                noise = noise_from_projection(obs.float(), self.noise_projection, self.noise_offset, self.n_diffusion_steps)
+            action = run_plan(self.plan(), x, noise)  # clipped to [-1, 1]
         # SB3's unscale_action: [-1, 1] -> [low, high]
         return self.action_low + 0.5 * (action + 1.0) * (self.action_high - self.action_low)
+
+    def _best_candidate(self, obs: th.Tensor, x: th.Tensor) -> th.Tensor:
+        """``predict``'s Q-ranked rule: the chain for ``n`` candidates per state, the best by the pessimistic critic."""
+        assert self.critic is not None
+        b, n = obs.shape[0], self.n_candidates
+        # rows ordered state by state, candidate within (predict's repeat_interleave); expand keeps ONNX's batch dynamic
+        obs_rep = obs.unsqueeze(1).expand(b, n, obs.shape[1]).reshape(b * n, obs.shape[1])  # [B n, obs]
+        x_rep = x.unsqueeze(1).expand(b, n, x.shape[1]).reshape(b * n, x.shape[1])  # [B n, features]
+        steps = self.candidate_noise.shape[0]
+        noise = self.candidate_noise.unsqueeze(1).expand(steps, b, n, self.action_dim).reshape(steps, b * n, self.action_dim)
+        actions = run_plan(self.plan(), x_rep, noise)  # [B n, A]
+        q = self.critic(obs_rep, actions).min(dim=0).values.view(b, n)  # [B, n]
+        idx = q.argmax(dim=1).view(b, 1, 1).expand(b, 1, self.action_dim)
+        return actions.view(b, n, self.action_dim).gather(1, idx).squeeze(1)  # [B, A]
+
+
+def _exportable_critic(critic: EnsembleCritic) -> EnsembleCritic:
+    """A CPU float32 copy of the target critics for the graph, its Mish modules as plain ``nn.Mish``."""
+    critic = copy.deepcopy(critic).cpu().float().requires_grad_(False).eval()
+    for i, layer in enumerate(critic.q_net):
+        if isinstance(layer, (TwiceDifferentiableMish, FusedMish)):
+            critic.q_net[i] = nn.Mish()
+    return critic
 
 
 def _exportable_activation(layer: Callable[[th.Tensor], th.Tensor]) -> nn.Module:
@@ -168,6 +204,12 @@ def check_exportable(policy: Any) -> None:
             (policy, POLAPolicy, ("_predict", "actor_features", "forward", "predict", "unscale_action")),
             (policy.features_extractor, StateProductsExtractor, ("forward", "normalize")),
             (policy.actor_ema if policy.predict_actor == "ema" else policy.actor, DiffusionActor, ("sample", "predict_noise")),
+            # the Q-ranked rule also runs the target critics
+            *(
+                [(policy.critic_target, EnsembleCritic, ("forward", "inputs", "q_values"))]
+                if policy.n_action_samples > 1
+                else []
+            ),
         )
         if isinstance(obj, cls)
         for name in names
@@ -175,16 +217,12 @@ def check_exportable(policy: Any) -> None:
     ]
     if not isinstance(policy.features_extractor, StateProductsExtractor):
         overridden.append(f"features extractor {type(policy.features_extractor).__name__}")
+    if policy.n_action_samples > 1 and not isinstance(policy.critic_target, EnsembleCritic):
+        overridden.append(f"critic {type(policy.critic_target).__name__}")
     if overridden:
         raise PolicyExportError(
             f"Cannot export {type(policy).__name__}: it overrides {', '.join(overridden)}, which the exported graph "
             "would not reproduce"
-        )
-    if policy.n_action_samples > 1:
-        raise PolicyExportError(
-            f"Cannot export a policy with n_action_samples={policy.n_action_samples}: its deterministic predict ranks "
-            "candidates by the critic, which the exported graph does not hold. Set model.policy.n_action_samples = 1 to "
-            "export the one-sample rule (a different policy)."
         )
     action_space = policy.action_space
     assert isinstance(action_space, spaces.Box)
