@@ -46,7 +46,8 @@ def _model(**kwargs):
 def ref_q(critic, obs: th.Tensor | None, actions: th.Tensor, detach: bool = False, features=None) -> th.Tensor:
     """``[N, B]`` Q-values, member by member with plain matmuls (no batched ensemble)."""
     x = th.cat((critic.features_extractor(obs) if features is None else features, actions), dim=-1)
-    layers = [m for m in critic.q_net if hasattr(m, "weight")]
+    layers = [m for m in critic.q_net if getattr(m, "weight", None) is not None]  # the linear layers
+    layer_norm = any(isinstance(m, th.nn.LayerNorm) for m in critic.q_net)  # before each hidden activation
     out = []
     for i in range(critic.n_critics):
         h = x
@@ -56,7 +57,7 @@ def ref_q(critic, obs: th.Tensor | None, actions: th.Tensor, detach: bool = Fals
                 w, b = w.detach(), b.detach()
             h = h @ w + b
             if j < len(layers) - 1:
-                h = F.mish(h)
+                h = F.mish(F.layer_norm(h, h.shape[-1:]) if layer_norm else h)
         out.append(h.squeeze(-1))
     return th.stack(out)
 
@@ -185,6 +186,7 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         # issue #23: the paper's noise target, and the lower confidence bound
         {"prediction_type": "epsilon"},
         {"lcb_coef": 1.5},
+        {"critic_layer_norm": False},  # the paper's plain critics (LayerNorm ones are the default)
     ],
 )
 def test_update_matches_reference(kwargs):

@@ -211,10 +211,11 @@ def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.P
     from sb3_pola import POLA
 
     # the rule's default leaves a signature as it was before the option existed; the defaults that departed from
-    # the paper's form changed it (cpu: cd99bea051, paper: f8a0da1694 before #12; 05ed254249, 6863b1ac8a before #23),
-    # so that a folder of the old defaults is not resumed under the new ones
+    # the paper's form changed it (cpu: cd99bea051, paper: f8a0da1694 before #12; 05ed254249, 6863b1ac8a before #23;
+    # 46209b7d80, 824efa1128 before #23's LayerNorm critics), so that a folder of the old defaults is not resumed
+    # under the new ones
     presets = grid_variants.PRESETS
-    assert presets["cpu"].signature() == "46209b7d80" and presets["paper"].signature() == "824efa1128"
+    assert presets["cpu"].signature() == "c8dd8105f2" and presets["paper"].signature() == "4c8e7685a9"
     base, sampled = tmp_path / "ema", tmp_path / "stochastic"
     assert run(score_data, base, "--variants", "T1", "--seeds", "0") == 0
     assert run(score_data, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0
