@@ -89,3 +89,5 @@ for s in 0 1 2; do
   "$PY" -m sb3_pola.cli run --config defaults --seed "$s" --steps 6000 --out "$OUT/l1/s$s"
   "$PY" experiments/policy_quality/rules.py "$OUT/l1/s$s/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
 done
+# speed: the new defaults (LayerNorm critics) beside the paper's form
+"$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" > "$OUT/bench_defaults_vs_paper_layernorm.json"
