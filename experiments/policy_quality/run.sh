@@ -77,14 +77,16 @@ done
   --extra "{\"critic_layer_norm\": false, $P1X, \"lcb_coef\": 2.0, $DYN, \"mean_loss\": \"nll\"}}"
 "$PY" experiments/policy_quality/rules.py "$OUT/d3/s0/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
 # P1-LN: the new defaults (on the old defaults: P1 + critic_layer_norm)
-for s in 0 1; do
+for s in 0 1 2; do
   for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
     "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name P1-LN \
       --rules noisefree,obsnoise,sample,best10 --kwargs "{$ACTOR}"
   done
 done
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name P1-LN \
-  --rules noisefree,obsnoise,best10 --kwargs "{$ACTOR}"
+for s in 0 1 2; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name P1-LN \
+    --rules noisefree,obsnoise,best10 --kwargs "{$ACTOR}"
+done
 for s in 0 1 2; do
   "$PY" -m sb3_pola.cli run --config defaults --seed "$s" --steps 6000 --out "$OUT/l1/s$s"
   "$PY" experiments/policy_quality/rules.py "$OUT/l1/s$s/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
