@@ -193,9 +193,9 @@ class POLA(OfflineAlgorithm):
     :param eta: weight of the Q term in the actor loss (``0`` = behaviour cloning): a float, or an SB3
         ``Schedule`` of the remaining progress (1 at the start of ``learn``, 0 at the end), e.g.
         :func:`~sb3_pola.common.schedules.warmup_schedule` for a behaviour-cloning warm-up
-    :param lookahead_normalization: ``"first"`` (the paper, eq. 3/4 as written): the ``T + 1`` weighted
+    :param lookahead_normalization: ``"first"`` (the paper, eq. 3/4 as written; default): the ``T + 1`` weighted
         Q terms are summed and divided by ``mean |Q|`` of the first, so the Q term's weight grows with
-        ``T`` (``sum_i gamma^i``, 3.94 at ``T = 3``); ``"weights"`` (default): also divided by
+        ``T`` (``sum_i gamma^i``, 3.94 at ``T = 3``); ``"weights"``: also divided by
         ``sum_i gamma^i``, so ``eta`` weighs the Q term the same for every ``T``
     :param q_scale_floor: lower bound of the detached ``mean |Q|`` that divides the Q term. ``None``:
         Diffusion-QL's batch mean alone (the paper; default). ``"auto"``: the dataset's value scale
