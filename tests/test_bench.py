@@ -45,3 +45,23 @@ def test_dynamics_table():
 def test_sections_in_an_unknown_shape_stay_readable():
     table = format_tables({"machine": MACHINE, "data": {"error": "OSError: x"}, "dynamics": {"error": "boom"}, "total_s": 1.0})
     assert "- error: OSError: x" in table and "- error: boom" in table
+
+
+def test_defaults_over_paper_form_checks_eager_and_compiled():
+    """#23's speed target: the defaults' step over the paper form's, eager and compiled, each next to its pair."""
+    from sb3_pola.benchmarks.train_bench import DEFAULTS_FORM, configurations, scaling_checks
+
+    names = {c["name"] for c in configurations(quick=False, compiled=True)}
+    assert {"defaults hopper", "defaults hopper, compiled update", "paper hopper, compiled update"} <= names
+    compiled_defaults = next(c for c in configurations(False, True) if c["name"] == "defaults hopper, compiled update")
+    assert compiled_defaults["kwargs"] == {**DEFAULTS_FORM, "compile_update": True}
+    rows = [
+        {"name": "paper hopper", "step_s": 1.0, "rollout_length": 3},
+        {"name": "defaults hopper", "step_s": 1.2},
+        {"name": "paper hopper, compiled update", "step_s": 0.5},
+        {"name": "defaults hopper, compiled update", "step_s": 0.7},
+    ]
+    checks = scaling_checks(rows)
+    assert checks["defaults_over_paper_form"]["met"] and abs(checks["defaults_over_paper_form"]["ratio"] - 1.2) < 1e-9
+    assert not checks["defaults_over_paper_form_compiled"]["met"]
+    assert abs(checks["defaults_over_paper_form_compiled"]["ratio"] - 1.4) < 1e-9

@@ -56,8 +56,9 @@ def mish_second_derivative(x: th.Tensor) -> th.Tensor:
 def _mish_second(x: th.Tensor, e: th.Tensor, r: th.Tensor) -> th.Tensor:
     # mish'' = 2 t' + x t'' = 4 e r^2 (2 (e + 1) + x (2 e + 1 - 4 e (e + 1)^2 r))
     e1 = e + 1.0
-    inner = (e * e1 * e1 * r).mul_(-4.0).add_(e, alpha=2.0).add_(1.0).mul_(x).add_(e1, alpha=2.0)
-    return inner.mul_(e).mul_(r).mul_(r).mul_(4.0)
+    inner = th.addcmul(e1, e, (e1 * e1).mul_(r), value=-4.0).add_(e)  # 2 e + 1 - 4 e (e + 1)^2 r
+    inner = th.addcmul(e1, inner, x, value=0.5)  # (e + 1) + x (...) / 2
+    return inner.mul_(e).mul_(r).mul_(r).mul_(8.0)
 
 
 class _Mish(th.autograd.Function):
@@ -75,7 +76,7 @@ class _Mish(th.autograd.Function):
         n = (e + 2.0).mul_(e)
         r = (n + 2.0).reciprocal_()
         t = n.mul_(r)
-        first = (e + 1.0).mul_(e).mul_(r).mul_(r).mul_(4.0).mul_(x).add_(t)  # t + x t'
+        first = th.addcmul(t, (e + 1.0).mul_(e).mul_(r).mul_(r), x, value=4.0)  # t + x t'
         ctx.save_for_backward(first)
         ctx.mark_non_differentiable(first, e, r)
         return x * t, first, e, r
