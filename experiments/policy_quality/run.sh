@@ -93,3 +93,36 @@ for s in 0 1 2; do
 done
 # speed: the new defaults (LayerNorm critics) beside the paper's form
 "$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" > "$OUT/bench_defaults_vs_paper_layernorm.json"
+
+# ---- 2026-12-03, afternoon (fourth pass): over the new defaults, one seed unless the loop says otherwise
+# the pendulum, one change at a time: NLL fit (pA), constant lr (pB), no EDAC term (pN1), eta 2 (pE2)
+"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/pA/s0" --extra "{$DYN, \"mean_loss\": \"nll\"}}"
+"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/pB/s0" --extra '{"learning_rate": 0.001}'
+"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/pN1/s0" --extra '{"critic_diversity": 0.0}'
+"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/pE2/s0" --extra '{"eta": 2.0}'
+for m in pA pB pN1 pE2; do
+  "$PY" experiments/policy_quality/rules.py "$OUT/$m/s0/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
+done
+# HalfCheetah without the EDAC term (N1) and at eta 2 (E2); T = 0 with the defaults (T0-LN)
+for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name N1 --rules noisefree,obsnoise,best10 \
+    --kwargs '{"critic_diversity": 0.0}'
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name T0-LN --rules noisefree,obsnoise,best10 \
+    --kwargs '{"rollout_length": 0}'
+done
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name E2 \
+  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 2.0}'
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name T0-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+# the medium maze (dataset: sb3-pola collect --env PointMaze_Medium-v3 --kind planner --steps 100000 --seed 0 --out DATA)
+for s in 0 1 2; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed "$s" --name P1-LN \
+    --rules noisefree,obsnoise,best10 --kwargs '{}'
+done
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed 0 --name BC \
+  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+# speed: the defaults' step (EDAC's input gradients written out) beside the paper form's, eager and compiled
+"$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" > "$OUT/bench_defaults_vs_paper_explicit_eager.json"
+"$PY" -m sb3_pola.benchmarks.train_bench --compiled --only "paper hopper" "defaults hopper" "paper hopper, compiled update" \
+  "defaults hopper, compiled update" > "$OUT/bench_defaults_vs_paper_compiled.json"
+"$PY" experiments/policy_quality/bench_input_gradients.py
