@@ -107,20 +107,28 @@ done
 for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name N1 --rules noisefree,obsnoise,best10 \
     --kwargs '{"critic_diversity": 0.0}'
-  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name T0-LN --rules noisefree,obsnoise,best10 \
-    --kwargs '{"rollout_length": 0}'
+  for s in 0 1 2; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0-LN \
+      --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+  done
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name E2 \
   --rules noisefree,obsnoise,best10 --kwargs '{"eta": 2.0}'
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name T0-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+for s in 0 1 2; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name T0-LN \
+    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+done
 # the medium maze (dataset: sb3-pola collect --env PointMaze_Medium-v3 --kind planner --steps 100000 --seed 0 --out DATA)
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed "$s" --name P1-LN \
     --rules noisefree,obsnoise,best10 --kwargs '{}'
 done
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed 0 --name BC \
-  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+for s in 0 1 2; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed "$s" --name BC \
+    --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+done
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed 0 --name T0-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
 # speed: the defaults' step (EDAC's input gradients written out) beside the paper form's, eager and compiled
 "$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" > "$OUT/bench_defaults_vs_paper_explicit_eager.json"
 "$PY" -m sb3_pola.benchmarks.train_bench --compiled --only "paper hopper" "defaults hopper" "paper hopper, compiled update" \
