@@ -134,3 +134,6 @@ done
 "$PY" -m sb3_pola.benchmarks.train_bench --compiled --only "paper hopper" "defaults hopper" "paper hopper, compiled update" \
   "defaults hopper, compiled update" > "$OUT/bench_defaults_vs_paper_compiled.json"
 "$PY" experiments/policy_quality/bench_input_gradients.py
+# T = 3 at T = 0's strength: the look-ahead terms' weights divided by their sum (W-LN)
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name W-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{"lookahead_normalization": "weights"}'
