@@ -135,5 +135,7 @@ done
   "defaults hopper, compiled update" > "$OUT/bench_defaults_vs_paper_compiled.json"
 "$PY" experiments/policy_quality/bench_input_gradients.py
 # T = 3 at T = 0's strength: the look-ahead terms' weights divided by their sum (W-LN)
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name W-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{"lookahead_normalization": "weights"}'
+for d in pointmaze/umaze-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name W-LN \
+    --rules noisefree,obsnoise,best10 --kwargs '{"lookahead_normalization": "weights"}'
+done
