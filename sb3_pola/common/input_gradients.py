@@ -19,7 +19,7 @@ import torch as th
 from torch import nn
 from torch.autograd.function import FunctionCtx, once_differentiable
 
-from sb3_pola.common.activations import EXP_CLAMP, FusedMish, TwiceDifferentiableMish
+from sb3_pola.common.activations import EXP_CLAMP, FusedMish, TwiceDifferentiableMish, eager_activations
 from sb3_pola.common.torch_layers import VectorizedLinear
 
 InputGradientFn = Callable[[nn.Sequential, th.Tensor, int], tuple[th.Tensor, th.Tensor]]
@@ -34,8 +34,6 @@ def autograd_input_gradients(q_net: nn.Sequential, inputs: th.Tensor, n_last: in
     :param inputs: ``[B, in]``, the input shared by every member
     :param n_last: how many trailing input dimensions to differentiate with respect to (the action's size)
     """
-    from sb3_pola.common.activations import eager_activations
-
     first_layer = q_net[0]
     assert isinstance(first_layer, VectorizedLinear)
     n_members = first_layer.ensemble_size
@@ -155,7 +153,6 @@ def _layer_kinds(q_net: nn.Sequential) -> list[tuple[VectorizedLinear, bool, str
         norm = isinstance(modules[i], nn.LayerNorm)
         if norm:
             layer_norm = modules[i]
-            assert isinstance(layer_norm, nn.LayerNorm)
             if layer_norm.elementwise_affine or layer_norm.eps != 1e-5:
                 return None
             i += 1
