@@ -348,3 +348,22 @@ def test_critic_maturity_gate_scales_eta_by_q_at_the_data_over_the_data_value():
     assert float(stats["actor_loss"]) == pytest.approx(float(stats["bc_loss"]), rel=1e-5)
     with pytest.raises(ValueError, match="eta_gate"):
         model_on_dataset(data, **light(eta_gate="maturity"))
+
+
+def test_critic_maturity_gate_fraction_opens_the_q_term_at_a_fraction_of_the_data_value():
+    data = synthetic_dataset(400, 3, 2, seed=0)
+    data.rewards[:] = np.abs(data.rewards) + 1.0  # positive rewards: Q at the data turns positive within a few steps
+    model = model_on_dataset(data, **light(rollout_length=1, eta_gate="critic_maturity", eta_gate_fraction=0.1))
+    model._before_training()
+    for _ in range(30):
+        stats = model._update(model._setup_offline_data().sample(32))
+    model.data_value = 1e3 * abs(float(stats["q_mean"]))
+    stats = model._update(model._setup_offline_data().sample(32))
+    # the gate divides by f G, not by G: tenfold the plain gate's value while both are inside (0, 1)
+    plain = float((stats["q_mean"] / model.data_value).clamp(0.0, 1.0))
+    assert 0.0 < plain < 0.1
+    assert float(stats["critic_maturity"]) == pytest.approx(10 * plain, rel=1e-5)
+    assert float(stats["eta"]) == pytest.approx(10 * plain * float(model.eta), rel=1e-5)
+    for bad in (0.0, -1.0):
+        with pytest.raises(ValueError, match="eta_gate_fraction"):
+            model_on_dataset(data, **light(eta_gate="critic_maturity", eta_gate_fraction=bad))

@@ -88,6 +88,7 @@ def check_pola_arguments(
     lcb_coef: float | None,
     critic_layer_norm: bool,
     eta_gate: str | None,
+    eta_gate_fraction: float,
     n_diffusion_steps: int,
     beta_schedule: str,
     prediction_type: str,
@@ -128,6 +129,7 @@ def check_pola_arguments(
         raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
     check_choice("critic_layer_norm", critic_layer_norm, (False, True))
     check_choice("eta_gate", eta_gate, ETA_GATES)
+    check_float("eta_gate_fraction", eta_gate_fraction, low=0.0, low_open=True)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
     check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
     check_choice("prediction_type", prediction_type, PREDICTION_TYPES)
@@ -231,6 +233,8 @@ class POLA(OfflineAlgorithm):
         ensemble's mean at the batch's data and ``G`` the dataset's mean discounted return-to-go
         (:meth:`~sb3_pola.common.datasets.OfflineDataset.returns_to_go`): the Q term opens as the critic learns the
         data's own value (logged as ``train/critic_maturity``). ``None`` (default): ``eta`` as given
+    :param eta_gate_fraction: ``f`` of the ``"critic_maturity"`` gate, which becomes ``clip(Q / (f G), 0, 1)``: the Q
+        term is fully open once the critic's Q at the data reaches the fraction ``f`` of the data's value. Default 1
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False`` (default):
         look-ahead states are detached, so each Q term only trains the action taken at its state: the actor
@@ -298,6 +302,7 @@ class POLA(OfflineAlgorithm):
         lcb_coef: float | None = None,
         critic_layer_norm: bool = True,
         eta_gate: str | None = None,
+        eta_gate_fraction: float = 1.0,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -335,6 +340,7 @@ class POLA(OfflineAlgorithm):
             lcb_coef=lcb_coef,
             critic_layer_norm=critic_layer_norm,
             eta_gate=eta_gate,
+            eta_gate_fraction=eta_gate_fraction,
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             prediction_type=prediction_type,
@@ -375,6 +381,7 @@ class POLA(OfflineAlgorithm):
         self.lookahead_uncertainty_cutoff = lookahead_uncertainty_cutoff
         self.lcb_coef = lcb_coef
         self.eta_gate = eta_gate
+        self.eta_gate_fraction = eta_gate_fraction
         # "critic_maturity": the dataset's mean discounted return-to-go, set once the data are loaded
         self.data_value: float | None = None
         self.backprop_through_model = backprop_through_model
@@ -558,7 +565,7 @@ class POLA(OfflineAlgorithm):
         self._eta_value.fill_(float(self.eta_schedule(self._current_progress_remaining)))
         if self.eta_gate == "critic_maturity" and self.data_value:
             # the Q term opens as the critic learns the data's own value: Q at the data over the mean return-to-go
-            maturity = (critic_stats["q_mean"] / self.data_value).clamp(0.0, 1.0)
+            maturity = (critic_stats["q_mean"] / (self.eta_gate_fraction * self.data_value)).clamp(0.0, 1.0)
             self._eta_value.mul_(maturity)
             critic_stats["critic_maturity"] = maturity
         with self._critic_frozen():
