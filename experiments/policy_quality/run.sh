@@ -139,3 +139,16 @@ for d in pointmaze/umaze-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0; 
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name W-LN \
     --rules noisefree,obsnoise,best10 --kwargs '{"lookahead_normalization": "weights"}'
 done
+
+# ---- 2026-12-03, evening (fifth pass)
+# the medium maze's T = 0 seeds 1 and 2 (seed 0 above)
+for s in 1 2; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed "$s" --name T0-LN \
+    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+done
+# the critic-maturity gate opening at a tenth of the data's value (G10): closed while the sparse mazes' Q sits below 0
+G10='{"eta_gate": "critic_maturity", "eta_gate_fraction": 0.1}'
+for d in pointmaze/umaze-v0 halfcheetah/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name G10-LN \
+    --rules noisefree,obsnoise,best10 --kwargs "$G10"
+done
