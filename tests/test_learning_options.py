@@ -299,6 +299,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "prediction_type": "epsilon",
         "learning_rate": 3e-4,
         "critic_layer_norm": False,
+        "eta_gate": None,
     }
     # the Q term at the paper's strength, bounded by LayerNorm critics (#23; #12's weakened form stays an option)
     shared = {"lookahead_normalization", "q_scale_floor"}
@@ -309,6 +310,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
     assert any(isinstance(m, th.nn.LayerNorm) for m in default.critic.q_net)
     assert not any(isinstance(m, th.nn.LayerNorm) for m in paper.critic.q_net)
     assert (default.critic_diversity, default.backprop_through_model) == (1.0, False)
+    assert (default.eta_gate, default.eta_gate_fraction) == ("critic_maturity", 0.1)
     assert default.prediction_type == "sample" and default.actor.prediction_type == "sample"
     assert paper.actor.prediction_type == "epsilon"
     assert isinstance(default.learning_rate, CosineSchedule) and default.learning_rate(1.0) == pytest.approx(1e-3)

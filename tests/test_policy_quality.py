@@ -13,7 +13,7 @@ from sb3_pola.common.diffusion import NoiseSchedule
 from sb3_pola.common.torch_layers import vectorized_mlp
 from sb3_pola.pola import pola as pola_module
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
-from sb3_pola.pola.pola import lookahead_q_objective
+from sb3_pola.pola.pola import PAPER_FORM, lookahead_q_objective
 from sb3_pola.pola.policies import DiffusionActor
 
 
@@ -332,38 +332,55 @@ def test_exported_graph_follows_the_deterministic_rule(rule, tmp_path):
 
 
 # ---------------------------------------------------------------- the Q term gated by the critic's maturity
-def test_critic_maturity_gate_scales_eta_by_q_at_the_data_over_the_data_value():
+def _gate(model, q_mean):
+    span = model.data_value - model.data_value_floor
+    return float(((q_mean - model.data_value_floor) / (model.eta_gate_fraction * span)).clamp(0.0, 1.0))
+
+
+def test_critic_maturity_gate_is_the_default_and_off_in_the_paper_form():
+    data = synthetic_dataset(200, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(rollout_length=0))
+    assert (model.eta_gate, model.eta_gate_fraction) == ("critic_maturity", 0.1)
+    assert PAPER_FORM["eta_gate"] is None
+
+
+def test_critic_maturity_gate_scales_eta_from_the_data_floor_to_a_fraction_of_the_data_value():
     data = synthetic_dataset(400, 3, 2, seed=0)
-    model = model_on_dataset(data, **light(rollout_length=1, eta_gate="critic_maturity"))
+    model = model_on_dataset(data, **light(rollout_length=1, eta_gate="critic_maturity", eta_gate_fraction=1.0))
     model._before_training()
-    assert model.data_value == pytest.approx(float(data.returns_to_go(model.gamma).mean()))
+    returns = data.returns_to_go(model.gamma)
+    assert model.data_value == pytest.approx(float(returns.mean()))
+    assert model.data_value_floor == pytest.approx(float(returns.min()))
+    # a floor at Q's level and a value far above it: the gate is strictly inside (0, 1)
+    q0 = float(model._update(model._setup_offline_data().sample(32))["q_mean"])
+    model.data_value_floor, model.data_value = q0 - 1.0, q0 + 1e3
     stats = model._update(model._setup_offline_data().sample(32))
-    expected = float((stats["q_mean"] / model.data_value).clamp(0.0, 1.0))
-    assert float(stats["critic_maturity"]) == pytest.approx(expected)
-    assert float(stats["eta"]) == pytest.approx(expected * float(model.eta))
-    # a critic far below the data's value: the Q term is closed and the actor's loss is the imitation loss alone
-    model.data_value = 1e9
+    expected = _gate(model, stats["q_mean"])
+    assert 0.0 < expected < 0.1
+    assert float(stats["critic_maturity"]) == pytest.approx(expected, rel=1e-5)
+    assert float(stats["eta"]) == pytest.approx(expected * float(model.eta), rel=1e-5)
+    # the fraction: the same distance covered opens the gate tenfold at f = 0.1
+    model.eta_gate_fraction = 0.1
+    stats = model._update(model._setup_offline_data().sample(32))
+    assert float(stats["critic_maturity"]) == pytest.approx(_gate(model, stats["q_mean"]), rel=1e-5)
+    assert float(stats["critic_maturity"]) > 5 * expected
+    # a critic below the data's floor (a sparse task's pessimism bias): the Q term is closed, the actor imitates
+    model.data_value_floor, model.data_value = q0 + 1e3, q0 + 2e3
     stats = model._update(model._setup_offline_data().sample(32))
     assert float(stats["eta"]) == pytest.approx(0.0, abs=1e-6)
     assert float(stats["actor_loss"]) == pytest.approx(float(stats["bc_loss"]), rel=1e-5)
+    for bad in (0.0, -1.0):
+        with pytest.raises(ValueError, match="eta_gate_fraction"):
+            model_on_dataset(data, **light(eta_gate="critic_maturity", eta_gate_fraction=bad))
     with pytest.raises(ValueError, match="eta_gate"):
         model_on_dataset(data, **light(eta_gate="maturity"))
 
 
-def test_critic_maturity_gate_fraction_opens_the_q_term_at_a_fraction_of_the_data_value():
-    data = synthetic_dataset(400, 3, 2, seed=0)
-    data.rewards[:] = np.abs(data.rewards) + 1.0  # positive rewards: Q at the data turns positive within a few steps
-    model = model_on_dataset(data, **light(rollout_length=1, eta_gate="critic_maturity", eta_gate_fraction=0.1))
+def test_critic_maturity_gate_stays_open_without_a_value_span():
+    data = synthetic_dataset(200, 3, 2, seed=0)
+    data.rewards[:] = 0.0  # every return-to-go is 0: nothing to measure the critic against
+    model = model_on_dataset(data, **light(rollout_length=0))
     model._before_training()
-    for _ in range(30):
-        stats = model._update(model._setup_offline_data().sample(32))
-    model.data_value = 1e3 * abs(float(stats["q_mean"]))
     stats = model._update(model._setup_offline_data().sample(32))
-    # the gate divides by f G, not by G: tenfold the plain gate's value while both are inside (0, 1)
-    plain = float((stats["q_mean"] / model.data_value).clamp(0.0, 1.0))
-    assert 0.0 < plain < 0.1
-    assert float(stats["critic_maturity"]) == pytest.approx(10 * plain, rel=1e-5)
-    assert float(stats["eta"]) == pytest.approx(10 * plain * float(model.eta), rel=1e-5)
-    for bad in (0.0, -1.0):
-        with pytest.raises(ValueError, match="eta_gate_fraction"):
-            model_on_dataset(data, **light(eta_gate="critic_maturity", eta_gate_fraction=bad))
+    assert "critic_maturity" not in stats
+    assert float(stats["eta"]) == pytest.approx(float(model.eta))

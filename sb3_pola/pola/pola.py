@@ -58,6 +58,7 @@ PAPER_FORM: dict[str, Any] = {
     "prediction_type": "epsilon",
     "learning_rate": 3e-4,
     "critic_layer_norm": False,
+    "eta_gate": None,
 }
 
 
@@ -168,14 +169,16 @@ class POLA(OfflineAlgorithm):
     MuJoCo rule for the env, or the model's learned termination head when the env is unknown)
     marks terminal contribute no Q term, and neither do any states after them.
 
-    Five defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
+    Six defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
     ``critic_layer_norm=True`` (LayerNorm critics, as ReBRAC: they bound Q off the data, so the Q term keeps the
     paper's full strength, ``lookahead_normalization="first"`` and no floor, without the actor climbing the critic's
     extrapolation; without them that strength collapsed the locomotion actors within a CPU budget),
     ``critic_diversity=1`` (EDAC's term: without it the ensemble agreed so closely that its minimum was no
     pessimism), ``backprop_through_model=False`` (the actor steered the model into states the critic overvalued),
     ``prediction_type="sample"`` (the actor regresses the clean action: it imitates as well as a plain MSE
-    regressor, the noise target did not) and a cosine learning rate from 1e-3. The dynamics model fits with beta-NLL
+    regressor, the noise target did not), a cosine learning rate from 1e-3 and ``eta_gate="critic_maturity"`` (the
+    Q term waits until the critic's Q at the data has left the pessimism bias below the data's lowest value: on
+    sparse mazes the unguarded Q term was noise that cost score). The dynamics model fits with beta-NLL
     and ``predict(deterministic=True)`` draws one sample with the observation's own noise
     (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``; the shipped
     InvertedPendulum main job keeps it (with the defaults the pendulum needs the Q-ranked rule,
@@ -229,12 +232,17 @@ class POLA(OfflineAlgorithm):
         can pull at the paper's strength without the actor climbing the critic's extrapolation. Passed to the policy
         (a ``critic_layer_norm`` in ``policy_kwargs`` takes precedence). Default ``True``; ``False``: plain MLP
         critics (the paper)
-    :param eta_gate: ``"critic_maturity"``: each step's ``eta`` is multiplied by ``clip(Q / G, 0, 1)``, ``Q`` the
-        ensemble's mean at the batch's data and ``G`` the dataset's mean discounted return-to-go
-        (:meth:`~sb3_pola.common.datasets.OfflineDataset.returns_to_go`): the Q term opens as the critic learns the
-        data's own value (logged as ``train/critic_maturity``). ``None`` (default): ``eta`` as given
-    :param eta_gate_fraction: ``f`` of the ``"critic_maturity"`` gate, which becomes ``clip(Q / (f G), 0, 1)``: the Q
-        term is fully open once the critic's Q at the data reaches the fraction ``f`` of the data's value. Default 1
+    :param eta_gate: ``"critic_maturity"`` (default): each step's ``eta`` is multiplied by
+        ``clip((Q - G_min) / (f (G - G_min)), 0, 1)``, ``Q`` the ensemble's mean at the batch's data, ``G`` and ``G_min``
+        the mean and the lowest discounted return-to-go of the dataset
+        (:meth:`~sb3_pola.common.datasets.OfflineDataset.returns_to_go`), ``f`` = ``eta_gate_fraction``: the Q term
+        opens as the critic's Q rises from the data's lowest value towards its mean (logged as
+        ``train/critic_maturity``). With dense rewards it is open within the first hundred steps (HalfCheetah:
+        ``G_min`` is below 0); with sparse rewards the ensemble minimum's pessimism bias holds Q below the data's
+        floor ``G_min = 0`` for thousands of steps, and meanwhile the actor imitates instead of following the critic's
+        noise (docs/results.md, issue #23's fifth pass). ``None``: ``eta`` as given (the paper)
+    :param eta_gate_fraction: ``f`` of the ``"critic_maturity"`` gate: the Q term is fully open once ``Q`` has covered
+        this fraction of the way from ``G_min`` to ``G``. Default ``0.1``
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False`` (default):
         look-ahead states are detached, so each Q term only trains the action taken at its state: the actor
@@ -301,8 +309,8 @@ class POLA(OfflineAlgorithm):
         lookahead_uncertainty_cutoff: float | None = None,
         lcb_coef: float | None = None,
         critic_layer_norm: bool = True,
-        eta_gate: str | None = None,
-        eta_gate_fraction: float = 1.0,
+        eta_gate: str | None = "critic_maturity",
+        eta_gate_fraction: float = 0.1,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -382,8 +390,9 @@ class POLA(OfflineAlgorithm):
         self.lcb_coef = lcb_coef
         self.eta_gate = eta_gate
         self.eta_gate_fraction = eta_gate_fraction
-        # "critic_maturity": the dataset's mean discounted return-to-go, set once the data are loaded
+        # "critic_maturity": the dataset's mean and lowest discounted return-to-go, set once the data are loaded
         self.data_value: float | None = None
+        self.data_value_floor = 0.0
         self.backprop_through_model = backprop_through_model
         self.n_diffusion_steps = n_diffusion_steps
         self.beta_schedule = beta_schedule
@@ -492,7 +501,8 @@ class POLA(OfflineAlgorithm):
         if self.eta_gate == "critic_maturity" and self.data_value is None:
             self._setup_offline_data()
             assert self._offline_data is not None
-            self.data_value = float(self._offline_data.returns_to_go(self.gamma).mean())
+            returns = self._offline_data.returns_to_go(self.gamma)
+            self.data_value, self.data_value_floor = float(returns.mean()), float(returns.min())
         dynamics = self.policy.dynamics
         if dynamics is None:
             return
@@ -563,9 +573,11 @@ class POLA(OfflineAlgorithm):
 
         # actor: L_d + eta L_q (eq. 6, eq. 4), the critic fixed
         self._eta_value.fill_(float(self.eta_schedule(self._current_progress_remaining)))
-        if self.eta_gate == "critic_maturity" and self.data_value:
-            # the Q term opens as the critic learns the data's own value: Q at the data over the mean return-to-go
-            maturity = (critic_stats["q_mean"] / (self.eta_gate_fraction * self.data_value)).clamp(0.0, 1.0)
+        span = (self.data_value or 0.0) - self.data_value_floor  # the data's values from the lowest to the mean
+        if self.eta_gate == "critic_maturity" and span > 0:
+            # the Q term opens as the critic's Q at the data rises from the data's lowest return-to-go towards the mean:
+            # below that floor Q is the ensemble minimum's pessimism bias, not a value (sparse rewards, early training)
+            maturity = ((critic_stats["q_mean"] - self.data_value_floor) / (self.eta_gate_fraction * span)).clamp(0, 1)
             self._eta_value.mul_(maturity)
             critic_stats["critic_maturity"] = maturity
         with self._critic_frozen():
