@@ -158,8 +158,6 @@ for s in 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name G10-LN \
     --rules noisefree,obsnoise,best10 --kwargs '{}'
 done
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed 0 --name G10-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{}'
 # Hopper-v5 (experiments/hopper/collect.sh; this machine's collection: experiments/hopper/collect_summary_intel.json)
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed "$s" --name G10-LN \
@@ -176,3 +174,6 @@ done
 # d3rlpy's baselines on the same Hopper files
 "$PY" -m sb3_pola.cli peers --datasets hopper/medium-v0 hopper/medium-replay-v0 --algos bc td3bc iql --seeds 0 1 2 \
   --steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/peers_hopper"
+# BC on the U-maze on this machine (seed 1), beside the gated defaults
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 1 --name BC \
+  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
