@@ -167,10 +167,12 @@ for s in 0 1 2; do
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name T0-G10 \
   --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed 0 --name G10-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{}'
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed 0 --name BC \
-  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+for s in 0 1; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed "$s" --name G10-LN \
+    --rules noisefree,obsnoise,best10 --kwargs '{}'
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed "$s" --name BC \
+    --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+done
 # d3rlpy's baselines on the same Hopper files
 "$PY" -m sb3_pola.cli peers --datasets hopper/medium-v0 hopper/medium-replay-v0 --algos bc td3bc iql --seeds 0 1 2 \
   --steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/peers_hopper"
