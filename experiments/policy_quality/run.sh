@@ -158,7 +158,8 @@ for s in 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name G10-LN \
     --rules noisefree,obsnoise,best10 --kwargs '{}'
 done
-# Hopper-v5 (experiments/hopper/collect.sh; this machine's collection: experiments/hopper/collect_summary_intel.json)
+# Hopper-v5 (experiments/hopper/collect.sh; this machine's collection: experiments/hopper/collect_summary_intel.json);
+# G10-LN's seed 0 on hopper/medium ran before the floor, with --kwargs '{"eta_gate": "critic_maturity", "eta_gate_fraction": 0.1}'
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed "$s" --name G10-LN \
     --rules noisefree,obsnoise,best10 --kwargs '{}'
