@@ -13,6 +13,7 @@ from sb3_pola.common.diffusion import NoiseSchedule
 from sb3_pola.common.torch_layers import vectorized_mlp
 from sb3_pola.pola import pola as pola_module
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
+from sb3_pola.pola.losses import value_lower_bound
 from sb3_pola.pola.pola import PAPER_FORM, lookahead_q_objective
 from sb3_pola.pola.policies import DiffusionActor
 
@@ -384,3 +385,36 @@ def test_critic_maturity_gate_stays_open_without_a_value_span():
     stats = model._update(model._setup_offline_data().sample(32))
     assert "critic_maturity" not in stats
     assert float(stats["eta"]) == pytest.approx(float(model.eta))
+
+
+def test_value_lower_bound_is_the_lowest_value_of_any_policy():
+    assert value_lower_bound(th.tensor([0.0, 1.0, 0.0]), 0.99) == 0.0  # sparse: no policy's value is below 0
+    assert value_lower_bound(th.tensor([0.5, 2.0]), 0.99) == 0.5  # an episode may end after one reward
+    assert value_lower_bound(th.tensor([-1.0, 3.0]), 0.99) == pytest.approx(-100.0)  # it may also never end
+    assert value_lower_bound(th.tensor([-1.0, 3.0]), 1.0) == float("-inf")
+
+
+def test_target_q_floor_bounds_the_bootstrapped_minimum_and_is_off_by_default():
+    data = synthetic_dataset(200, 3, 2, seed=0)
+    data.rewards[:] = 0.0
+    data.rewards[::50] = 1.0  # sparse: r_min = 0
+    model = model_on_dataset(data, **light(rollout_length=0))
+    assert model.target_q_floor is None and PAPER_FORM.get("target_q_floor") is None
+    model._before_training()
+    assert model.target_q_floor_value is None
+    floored = model_on_dataset(data, **light(rollout_length=0, target_q_floor="auto"))
+    floored._before_training()
+    assert floored.target_q_floor_value == 0.0
+    # target critics far below the floor: the floored target is the reward alone (plus gamma * 0)
+    for m in (model, floored):
+        with th.no_grad():
+            m.critic_target.q_net[-1].weight.zero_()
+            m.critic_target.q_net[-1].bias.fill_(-50.0)
+    batch = floored._setup_offline_data().sample(64)
+    args = (batch.observations, batch.actions, batch.next_observations, batch.rewards.flatten(), batch.dones.flatten())
+    _, stats = floored._critic_loss(*args)
+    assert float(stats["target_q"]) == pytest.approx(float(batch.rewards.mean()), abs=1e-5)
+    _, stats = model._critic_loss(*args)
+    assert float(stats["target_q"]) < -10.0
+    with pytest.raises(ValueError, match="target_q_floor"):
+        model_on_dataset(data, **light(target_q_floor="lowest"))

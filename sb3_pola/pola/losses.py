@@ -10,6 +10,19 @@ def lookahead_weights(gamma_powers: th.Tensor, normalization: str) -> th.Tensor:
     return gamma_powers / gamma_powers.sum() if normalization == "weights" else gamma_powers
 
 
+def value_lower_bound(rewards: th.Tensor, gamma: float) -> float:
+    """The lowest value any policy can have on rewards no lower than the data's smallest ``r_min``.
+
+    ``Q(s, a) = r + gamma r' + ...`` collects at least one reward, so ``Q >= r_min`` when ``r_min >= 0`` (an episode
+    may end after it), and ``Q >= r_min / (1 - gamma)`` when ``r_min < 0`` (it may not end); ``-inf`` for
+    ``r_min < 0`` with ``gamma = 1``.
+    """
+    r_min = float(rewards.min())
+    if r_min >= 0:
+        return r_min
+    return r_min / (1.0 - gamma) if gamma < 1 else float("-inf")
+
+
 def ensemble_similarity(q_action_grads: th.Tensor) -> th.Tensor:
     """EDAC's ensemble similarity (An et al., 2021, eq. 8): ``sum_{i != j} <g_i, g_j> / (N - 1)``, batch mean.
 

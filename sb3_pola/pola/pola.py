@@ -30,7 +30,7 @@ from sb3_pola.common.termination import TerminationFn, get_termination_fn
 from sb3_pola.common.validation import check_choice, check_float, check_float_or_schedule, check_int
 from sb3_pola.pola.export import export_policy
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
-from sb3_pola.pola.losses import ensemble_similarity, lookahead_q_objective, lookahead_weights
+from sb3_pola.pola.losses import ensemble_similarity, lookahead_q_objective, lookahead_weights, value_lower_bound
 from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy
 
 SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
@@ -82,6 +82,7 @@ def check_pola_arguments(
     gamma: float,
     lookahead_normalization: str,
     q_scale_floor: float | str | None,
+    target_q_floor: float | str | None,
     critic_diversity: float,
     critic_diversity_inputs: str,
     lookahead_uncertainty_penalty: float,
@@ -119,6 +120,10 @@ def check_pola_arguments(
             "q_scale_floor='auto' needs gamma < 1 (the data's value scale is mean |r| / (1 - gamma)); "
             "give q_scale_floor a number or None"
         )
+    if target_q_floor is None or isinstance(target_q_floor, str):
+        check_choice("target_q_floor", target_q_floor, (None, "auto"))
+    else:
+        check_float("target_q_floor", target_q_floor)
     check_float("critic_diversity", critic_diversity, low=0.0)
     check_choice("critic_diversity_inputs", critic_diversity_inputs, CRITIC_DIVERSITY_INPUTS)
     if critic_diversity > 0 and n_critics < 2:
@@ -208,6 +213,11 @@ class POLA(OfflineAlgorithm):
         so while the critic is immature (``|Q|`` far below the returns it will reach) its gradient pulls
         the actor in proportion to how far it has learned, instead of at full strength from the first step.
         A float: that floor
+    :param target_q_floor: lower bound of the critic's bootstrapped ``min_j Q_j(s', a')``. ``"auto"``: the lowest
+        value any policy can have on rewards no lower than the data's (:func:`value_lower_bound`: ``r_min`` for
+        ``r_min >= 0``, ``r_min / (1 - gamma)`` below): with sparse rewards (``r_min = 0``) the minimum over the
+        ensemble otherwise drags Q below 0, a value no policy has. A float: that floor. ``None``: no floor (the paper;
+        default)
     :param critic_diversity: weight ``eta_ES`` of EDAC's ensemble-similarity term added to the critic loss
         (:func:`ensemble_similarity`): it decorrelates the members' action gradients at the data, so that they
         disagree off it and the minimum over the ensemble (targets) and its top-K (eq. 4) are pessimistic where the
@@ -303,6 +313,7 @@ class POLA(OfflineAlgorithm):
         eta: float | Schedule = 1.0,
         lookahead_normalization: str = "first",
         q_scale_floor: float | str | None = None,
+        target_q_floor: float | str | None = None,
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
@@ -341,6 +352,7 @@ class POLA(OfflineAlgorithm):
             gamma=gamma,
             lookahead_normalization=lookahead_normalization,
             q_scale_floor=q_scale_floor,
+            target_q_floor=target_q_floor,
             critic_diversity=critic_diversity,
             critic_diversity_inputs=critic_diversity_inputs,
             lookahead_uncertainty_penalty=lookahead_uncertainty_penalty,
@@ -383,6 +395,9 @@ class POLA(OfflineAlgorithm):
         self.q_scale_floor = q_scale_floor
         # the floor's value: q_scale_floor, or the dataset's value scale once the data are loaded ("auto")
         self.q_scale_floor_value: float | None = None if q_scale_floor == "auto" else float(q_scale_floor or 0.0)
+        self.target_q_floor = target_q_floor
+        # the floor's value: target_q_floor, or the lowest value any policy can have on the data's rewards ("auto")
+        self.target_q_floor_value: float | None = None if target_q_floor in (None, "auto") else float(target_q_floor)
         self.critic_diversity = critic_diversity
         self.critic_diversity_inputs = critic_diversity_inputs
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
@@ -498,6 +513,8 @@ class POLA(OfflineAlgorithm):
         if self.q_scale_floor_value is None:  # "auto": the value scale of the dataset's rewards
             rewards = self._setup_offline_data().rewards
             self.q_scale_floor_value = float(rewards.abs().mean()) / (1.0 - self.gamma)
+        if self.target_q_floor == "auto" and self.target_q_floor_value is None:
+            self.target_q_floor_value = value_lower_bound(self._setup_offline_data().rewards, self.gamma)
         if self.eta_gate == "critic_maturity" and self.data_value is None:
             self._setup_offline_data()
             assert self._offline_data is not None
@@ -637,6 +654,8 @@ class POLA(OfflineAlgorithm):
         with th.no_grad():
             next_actions = self._sample_target(self.policy.actor_features(next_obs))  # a' from the EMA actor
             next_q = self.critic_target(next_obs, next_actions).min(dim=0).values  # [B]
+            if self.target_q_floor_value is not None:  # no policy's value lies below it: the rest is pessimism bias
+                next_q = next_q.clamp_min(self.target_q_floor_value)
             target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
         input_grads = None
         if self.critic_diversity == 0:
