@@ -16,6 +16,7 @@ metadata, so a changed dataset never gets stale arrays).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import pathlib
@@ -37,7 +38,7 @@ from sb3_pola.common.dataset_cache import (
     save_cache,
     write_digest_index,
 )
-from sb3_pola.common.dict_obs import check_dict_space, flat_space, flatten_env, flatten_episode_observations
+from sb3_pola.common.dict_obs import check_dict_space, flat_space, flatten_env, flatten_episode_observations, key_slice
 from sb3_pola.common.errors import UserError
 from sb3_pola.common.extras import import_gymnasium_robotics
 from sb3_pola.common.metrics import normalized_score
@@ -176,6 +177,26 @@ class OfflineDataset:
             ends[:-1] |= np.any(self.next_observations[:-1] != self.observations[1:], axis=1)
             ends[-1] = True
         return ends
+
+    def goal_switches(self) -> np.ndarray:
+        """``[N]`` bool, True where the ``desired_goal`` of a goal-conditioned dataset changes between a transition's
+        observation and its next one: the collector drew a new goal once the old one was reached (Minari's and D4RL's
+        mazes), a switch of task that no action caused. All False without a ``desired_goal``."""
+        space = self.dict_observation_space
+        if space is None or "desired_goal" not in space.spaces:
+            return np.zeros(len(self), dtype=bool)
+        goal = key_slice(space, "desired_goal")
+        return np.any(self.observations[:, goal] != self.next_observations[:, goal], axis=1)
+
+    def with_goal_switches_terminal(self) -> OfflineDataset:
+        """A copy whose ``dones`` are also 1 at :meth:`goal_switches`: each goal is an episode of its own, ended when it
+        is reached, so values are not bootstrapped from the next goal's states."""
+        dones = np.maximum(self.dones, self.goal_switches().astype(self.dones.dtype))
+        tag = "+goal-switches-terminal"
+        fingerprint = (
+            self.fingerprint if self.fingerprint is None or self.fingerprint.endswith(tag) else self.fingerprint + tag
+        )
+        return dataclasses.replace(self, dones=dones, fingerprint=fingerprint)
 
     def returns_to_go(self, gamma: float) -> np.ndarray:
         """``[N]`` float64 discounted return from each transition to its episode's end, ``sum_k gamma^k r_{t+k}``.

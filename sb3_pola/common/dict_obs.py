@@ -36,6 +36,17 @@ def flat_space(space: spaces.Dict) -> spaces.Box:
     return flat
 
 
+def key_slice(space: spaces.Dict, key: str) -> slice:
+    """The columns of ``key`` in the flattened vector (the space's key order, each key C-order)."""
+    start = 0
+    for name, sub in space.spaces.items():
+        size = int(np.prod(sub.shape))
+        if name == key:
+            return slice(start, start + size)
+        start += size
+    raise KeyError(f"{key!r} is not a key of {space}")
+
+
 def flatten_episode_observations(space: spaces.Dict, observations: dict[str, Any], n: int) -> np.ndarray:
     """``[n, D]`` rows of one episode's dict observations (each key ``[n, *shape]``), in the space's key order."""
     missing = set(space.spaces) - set(observations)

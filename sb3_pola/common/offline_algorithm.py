@@ -228,9 +228,14 @@ class OfflineAlgorithm(OffPolicyAlgorithm):
                 else:
                     self._offline_data = load_offline_dataset(self.dataset, download=self.download)
                 self.dataset = dataset_reference(self.dataset)
+            self._offline_data = self._prepare_offline_data(self._offline_data)
             self._check_dataset_spaces(self._offline_data)
             self.replay_buffer = OfflineReplayBuffer(self._offline_data, device=self.device)
         return self.replay_buffer
+
+    def _prepare_offline_data(self, data: OfflineDataset) -> OfflineDataset:
+        """The dataset as this algorithm learns from it (a subclass may relabel it); the loaded one by default."""
+        return data
 
     def _check_dataset_spaces(self, data: OfflineDataset) -> None:
         assert self.observation_space is not None and self.action_space is not None

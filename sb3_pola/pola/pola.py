@@ -83,6 +83,7 @@ def check_pola_arguments(
     lookahead_normalization: str,
     q_scale_floor: float | str | None,
     target_q_floor: float | str | None,
+    goal_switch_terminal: bool,
     critic_diversity: float,
     critic_diversity_inputs: str,
     lookahead_uncertainty_penalty: float,
@@ -124,6 +125,7 @@ def check_pola_arguments(
         check_choice("target_q_floor", target_q_floor, (None, "auto"))
     else:
         check_float("target_q_floor", target_q_floor)
+    check_choice("goal_switch_terminal", goal_switch_terminal, (False, True))
     check_float("critic_diversity", critic_diversity, low=0.0)
     check_choice("critic_diversity_inputs", critic_diversity_inputs, CRITIC_DIVERSITY_INPUTS)
     if critic_diversity > 0 and n_critics < 2:
@@ -218,6 +220,12 @@ class POLA(OfflineAlgorithm):
         ``r_min >= 0``, ``r_min / (1 - gamma)`` below): with sparse rewards (``r_min = 0``) the minimum over the
         ensemble otherwise drags Q below 0, a value no policy has. A float: that floor. ``None``: no floor (the paper;
         default)
+    :param goal_switch_terminal: on goal-conditioned data (a ``desired_goal`` in the observations), treat each
+        transition where the goal changes as terminal
+        (:meth:`~sb3_pola.common.datasets.OfflineDataset.with_goal_switches_terminal`): the mazes' collectors draw a
+        new goal the step the old one is reached, so without it the critic bootstraps the reaching step from a
+        state whose goal is elsewhere, and no transition shows staying at a goal. ``False``: the data's own
+        terminations (default)
     :param critic_diversity: weight ``eta_ES`` of EDAC's ensemble-similarity term added to the critic loss
         (:func:`ensemble_similarity`): it decorrelates the members' action gradients at the data, so that they
         disagree off it and the minimum over the ensemble (targets) and its top-K (eq. 4) are pessimistic where the
@@ -314,6 +322,7 @@ class POLA(OfflineAlgorithm):
         lookahead_normalization: str = "first",
         q_scale_floor: float | str | None = None,
         target_q_floor: float | str | None = None,
+        goal_switch_terminal: bool = False,
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
@@ -353,6 +362,7 @@ class POLA(OfflineAlgorithm):
             lookahead_normalization=lookahead_normalization,
             q_scale_floor=q_scale_floor,
             target_q_floor=target_q_floor,
+            goal_switch_terminal=goal_switch_terminal,
             critic_diversity=critic_diversity,
             critic_diversity_inputs=critic_diversity_inputs,
             lookahead_uncertainty_penalty=lookahead_uncertainty_penalty,
@@ -371,6 +381,8 @@ class POLA(OfflineAlgorithm):
             dynamics_kwargs=dynamics_kwargs,
             dynamics_fit_kwargs=dynamics_fit_kwargs,
         )
+        # read while the base class loads the dataset (_prepare_offline_data), so set before it
+        self.goal_switch_terminal = goal_switch_terminal
         super().__init__(
             policy,
             env,
@@ -507,6 +519,9 @@ class POLA(OfflineAlgorithm):
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "actor.optimizer", "critic.optimizer"], []
+
+    def _prepare_offline_data(self, data: OfflineDataset) -> OfflineDataset:
+        return data.with_goal_switches_terminal() if self.goal_switch_terminal else data
 
     # ------------------------------------------------------------------ dynamics model
     def _before_training(self, progress_bar: bool = False) -> None:
