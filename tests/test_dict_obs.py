@@ -11,7 +11,14 @@ from helpers import light_kwargs, record_random_dataset
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_pola import POLA
-from sb3_pola.common.datasets import DatasetError, OfflineDataset, load_offline_dataset, make_env
+from sb3_pola.common.datasets import (
+    DatasetError,
+    OfflineDataset,
+    load_offline_dataset,
+    make_env,
+    package_datasets_dir,
+    synthetic_dataset,
+)
 from sb3_pola.common.dict_obs import check_dict_space, flatten_observation
 
 KEYS = ["achieved_goal", "desired_goal", "observation"]  # Gymnasium's (sorted) order, the flattening order
@@ -178,3 +185,29 @@ def test_export_takes_the_flattened_vector(goal_model: POLA, tmp_path: pathlib.P
     with th.no_grad():
         exported = graph(th.as_tensor(flat)[None])[0].numpy()
     np.testing.assert_allclose(exported, goal_model.predict(obs, deterministic=True)[0], atol=1e-5)
+
+
+def test_goal_switches_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, tmp_path: pathlib.Path) -> None:
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(package_datasets_dir()))
+    data = load_offline_dataset("pointmaze/umaze-v0", cache_dir=tmp_path)
+    goal = slice(2, 4)  # desired_goal, after achieved_goal (2 columns) in the flattening order
+    switches = data.goal_switches()
+    changed = np.any(data.observations[:, goal] != data.next_observations[:, goal], axis=1)
+    np.testing.assert_array_equal(switches, changed)
+    assert switches.sum() > 100 and data.dones.sum() == 0
+    # the collector draws a new goal the step after the old one is reached
+    assert (data.rewards[np.flatnonzero(switches) - 1] > 0).mean() > 0.95
+    relabelled = data.with_goal_switches_terminal()
+    np.testing.assert_array_equal(relabelled.dones.astype(bool), switches)
+    assert relabelled.fingerprint != data.fingerprint
+    assert relabelled.with_goal_switches_terminal().fingerprint == relabelled.fingerprint
+    assert data.dones.sum() == 0  # the original is left alone
+    model = POLA("MlpPolicy", dataset=data, goal_switch_terminal=True, **light_kwargs())
+    np.testing.assert_array_equal(model.offline_data.dones.astype(bool), switches)
+    assert not POLA("MlpPolicy", dataset=data, **light_kwargs()).offline_data.dones.any()  # off by default
+
+
+def test_no_goal_switches_without_a_desired_goal() -> None:
+    data = synthetic_dataset(50, 3, 2, seed=0)
+    assert not data.goal_switches().any()
+    np.testing.assert_array_equal(data.with_goal_switches_terminal().dones, data.dones)
