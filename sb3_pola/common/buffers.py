@@ -82,8 +82,11 @@ class OfflineReplayBuffer(BaseBuffer):
         :return: tensors on ``device``: observations ``[B, obs_dim]``, actions ``[B, act_dim]``,
             next_observations, dones ``[B, 1]``, rewards ``[B, 1]``
         """
-        indices = th.randint(0, self.buffer_size, (batch_size,), device=self.device)
-        return self._get_samples(indices)
+        return self._get_samples(self.sample_indices(batch_size))
+
+    def sample_indices(self, batch_size: int) -> th.Tensor:
+        """``[B]`` uniform transition indices (with replacement), the draw :meth:`sample` makes."""
+        return th.randint(0, self.buffer_size, (batch_size,), device=self.device)
 
     def _get_samples(  # type: ignore[override]
         self, batch_inds: np.ndarray | th.Tensor, env: VecNormalize | None = None

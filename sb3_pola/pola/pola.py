@@ -122,7 +122,7 @@ def check_pola_arguments(
             "give q_scale_floor a number or None"
         )
     if target_q_floor is None or isinstance(target_q_floor, str):
-        check_choice("target_q_floor", target_q_floor, (None, "auto"))
+        check_choice("target_q_floor", target_q_floor, (None, "auto", "returns"))
     else:
         check_float("target_q_floor", target_q_floor)
     check_choice("goal_switch_terminal", goal_switch_terminal, (False, True))
@@ -218,8 +218,13 @@ class POLA(OfflineAlgorithm):
     :param target_q_floor: lower bound of the critic's bootstrapped ``min_j Q_j(s', a')``. ``"auto"``: the lowest
         value any policy can have on rewards no lower than the data's (:func:`value_lower_bound`: ``r_min`` for
         ``r_min >= 0``, ``r_min / (1 - gamma)`` below): with sparse rewards (``r_min = 0``) the minimum over the
-        ensemble otherwise drags Q below 0, a value no policy has. A float: that floor. ``None``: no floor (the paper;
-        default)
+        ensemble otherwise drags Q below 0, a value no policy has. ``"returns"``: the whole target
+        ``r + gamma min_j Q_j(s', a')`` floored at the data's discounted return-to-go from the transition
+        (:meth:`~sb3_pola.common.datasets.OfflineDataset.returns_to_go`; Monte-Carlo augmented targets, MCAC,
+        Wilcox et al. 2022): the data's own return from ``(s, a)`` is a value the optimal policy at least reaches, so Q
+        at the data starts at the data's values instead of climbing to them one target update at a time, and on sparse
+        rewards the value of reaching a goal is there from the first step. A float: that floor. ``None``: no floor (the
+        paper; default)
     :param goal_switch_terminal: on goal-conditioned data (a ``desired_goal`` in the observations), treat each
         transition where the goal changes as terminal
         (:meth:`~sb3_pola.common.datasets.OfflineDataset.with_goal_switches_terminal`): the mazes' collectors draw a
@@ -409,7 +414,11 @@ class POLA(OfflineAlgorithm):
         self.q_scale_floor_value: float | None = None if q_scale_floor == "auto" else float(q_scale_floor or 0.0)
         self.target_q_floor = target_q_floor
         # the floor's value: target_q_floor, or the lowest value any policy can have on the data's rewards ("auto")
-        self.target_q_floor_value: float | None = None if target_q_floor in (None, "auto") else float(target_q_floor)
+        self.target_q_floor_value: float | None = (
+            None if target_q_floor in (None, "auto", "returns") else float(target_q_floor)
+        )
+        # "returns": the dataset's discounted return-to-go of every transition, [N], set once the data are loaded
+        self._data_returns: th.Tensor | None = None
         self.critic_diversity = critic_diversity
         self.critic_diversity_inputs = critic_diversity_inputs
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
@@ -513,6 +522,7 @@ class POLA(OfflineAlgorithm):
             "_sample_actor",
             "_sample_target",
             "_critic_loss_fn",
+            "_data_returns",
             "_actor_loss_fn",
             "eta_schedule",
         ]
@@ -528,6 +538,11 @@ class POLA(OfflineAlgorithm):
         if self.q_scale_floor_value is None:  # "auto": the value scale of the dataset's rewards
             rewards = self._setup_offline_data().rewards
             self.q_scale_floor_value = float(rewards.abs().mean()) / (1.0 - self.gamma)
+        if self.target_q_floor == "returns" and self._data_returns is None:
+            self._setup_offline_data()
+            assert self._offline_data is not None
+            returns = self._offline_data.returns_to_go(self.gamma)
+            self._data_returns = th.as_tensor(returns, dtype=th.float32, device=self.device)  # [N]
         if self.target_q_floor == "auto" and self.target_q_floor_value is None:
             self.target_q_floor_value = value_lower_bound(self._setup_offline_data().rewards, self.gamma)
         if self.eta_gate == "critic_maturity" and self.data_value is None:
@@ -588,16 +603,21 @@ class POLA(OfflineAlgorithm):
         self._update_learning_rate([self.actor.optimizer, self.critic.optimizer])
         buffer = self._setup_offline_data()
         for _ in range(gradient_steps):
-            self._accumulate_train_stats(self._update(buffer.sample(batch_size)))
+            indices = buffer.sample_indices(batch_size)
+            returns = None if self._data_returns is None else self._data_returns[indices]
+            self._accumulate_train_stats(self._update(buffer._get_samples(indices), returns))
             self._n_updates += 1
 
-    def _update(self, batch: ReplayBufferSamples) -> dict[str, th.Tensor]:
-        """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics."""
+    def _update(self, batch: ReplayBufferSamples, returns: th.Tensor | None = None) -> dict[str, th.Tensor]:
+        """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics.
+
+        ``returns``: ``[B]`` the data's discounted returns-to-go of the batch's transitions (``target_q_floor="returns"``)
+        """
         obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
         rewards, dones = batch.rewards.flatten(), batch.dones.flatten()
 
         # critic: TD regression on the pessimistic target (section IV)
-        critic_loss, critic_stats = self._critic_loss_fn(obs, actions, next_obs, rewards, dones)
+        critic_loss, critic_stats = self._critic_loss_fn(obs, actions, next_obs, rewards, dones, returns)
         self.critic.optimizer.zero_grad(set_to_none=True)
         critic_loss.backward()
         critic_grad_norm = self._clip(self.critic.parameters())
@@ -663,7 +683,13 @@ class POLA(OfflineAlgorithm):
             self.critic.requires_grad_(True)
 
     def _critic_loss(
-        self, obs: th.Tensor, actions: th.Tensor, next_obs: th.Tensor, rewards: th.Tensor, dones: th.Tensor
+        self,
+        obs: th.Tensor,
+        actions: th.Tensor,
+        next_obs: th.Tensor,
+        rewards: th.Tensor,
+        dones: th.Tensor,
+        returns: th.Tensor | None = None,
     ) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """TD loss of every ensemble member on the pessimistic target, min over the target ensemble (section IV)."""
         with th.no_grad():
@@ -672,6 +698,8 @@ class POLA(OfflineAlgorithm):
             if self.target_q_floor_value is not None:  # no policy's value lies below it: the rest is pessimism bias
                 next_q = next_q.clamp_min(self.target_q_floor_value)
             target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
+            if returns is not None:  # the data's own return from (s, a) is a value the greedy policy can at least reach
+                target_q = th.maximum(target_q, returns)
         input_grads = None
         if self.critic_diversity == 0:
             current_q = self.critic(obs, actions)  # [N, B]
