@@ -197,17 +197,26 @@ def test_goal_switches_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, tmp
     assert switches.sum() > 100 and data.dones.sum() == 0
     # the collector draws a new goal the step after the old one is reached
     assert (data.rewards[np.flatnonzero(switches) - 1] > 0).mean() > 0.95
-    relabelled = data.with_goal_switches_terminal()
-    np.testing.assert_array_equal(relabelled.dones.astype(bool), switches)
-    assert relabelled.fingerprint != data.fingerprint
-    assert relabelled.with_goal_switches_terminal().fingerprint == relabelled.fingerprint
+    terminal = data.with_goal_switches("terminal")
+    np.testing.assert_array_equal(terminal.dones.astype(bool), switches)
+    assert terminal.fingerprint != data.fingerprint
+    assert terminal.with_goal_switches("terminal").fingerprint == terminal.fingerprint
     assert data.dones.sum() == 0  # the original is left alone
-    model = POLA("MlpPolicy", dataset=data, goal_switch_terminal=True, **light_kwargs())
+    model = POLA("MlpPolicy", dataset=data, goal_switches="terminal", **light_kwargs())
     np.testing.assert_array_equal(model.offline_data.dones.astype(bool), switches)
     assert not POLA("MlpPolicy", dataset=data, **light_kwargs()).offline_data.dones.any()  # off by default
+    # relabelled: the switch keeps its goal, and the env's reward of it says the policy is still there
+    model = POLA("MlpPolicy", dataset=data, goal_switches="relabel", **light_kwargs())
+    relabelled = model.offline_data
+    assert not relabelled.goal_switches().any() and not relabelled.dones.any()
+    np.testing.assert_array_equal(relabelled.next_observations[switches, goal], data.observations[switches, goal])
+    np.testing.assert_array_equal(relabelled.rewards[~switches], data.rewards[~switches])
+    assert relabelled.rewards[switches].mean() > 0.9 > data.rewards[switches].mean()
+    with pytest.raises(ValueError, match="goal_switches"):
+        POLA("MlpPolicy", dataset=data, goal_switches="hindsight", **light_kwargs())
 
 
 def test_no_goal_switches_without_a_desired_goal() -> None:
     data = synthetic_dataset(50, 3, 2, seed=0)
     assert not data.goal_switches().any()
-    np.testing.assert_array_equal(data.with_goal_switches_terminal().dones, data.dones)
+    np.testing.assert_array_equal(data.with_goal_switches("terminal").dones, data.dones)

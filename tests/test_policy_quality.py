@@ -418,3 +418,28 @@ def test_target_q_floor_bounds_the_bootstrapped_minimum_and_is_off_by_default():
     assert float(stats["target_q"]) < -10.0
     with pytest.raises(ValueError, match="target_q_floor"):
         model_on_dataset(data, **light(target_q_floor="lowest"))
+
+
+def test_target_q_floor_returns_floors_the_target_at_the_datas_return_to_go():
+    data = synthetic_dataset(300, 3, 2, seed=1)
+    model = model_on_dataset(data, **light(rollout_length=0, target_q_floor="returns"))
+    model._before_training()
+    returns = data.returns_to_go(model.gamma)
+    np.testing.assert_allclose(model._data_returns.cpu().numpy(), returns, rtol=1e-5, atol=1e-5)
+    with th.no_grad():  # target critics far below every return: the floor decides every target
+        model.critic_target.q_net[-1].weight.zero_()
+        model.critic_target.q_net[-1].bias.fill_(-1e3)
+    buffer = model._setup_offline_data()
+    indices = buffer.sample_indices(64)
+    batch = buffer._get_samples(indices)
+    args = (batch.observations, batch.actions, batch.next_observations, batch.rewards.flatten(), batch.dones.flatten())
+    _, stats = model._critic_loss(*args, model._data_returns[indices])
+    assert float(stats["target_q"]) == pytest.approx(float(returns[indices.cpu().numpy()].mean()), rel=1e-5)
+    _, stats = model._critic_loss(*args)  # without the returns: the plain pessimistic target
+    assert float(stats["target_q"]) < -100.0
+    # train() hands each batch its own returns: one step with the floor differs from one without
+    calls = []
+    original = model._critic_loss_fn
+    model._critic_loss_fn = lambda *a: calls.append(a[-1]) or original(*a)
+    model.train(1, batch_size=16)
+    assert calls[0] is not None and calls[0].shape == (16,)

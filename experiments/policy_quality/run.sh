@@ -180,3 +180,40 @@ done
 # BC on the U-maze on this machine (seed 1), beside the gated defaults
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 1 --name BC \
   --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+
+# ---- 2026-12-03, night (sixth pass): the defaults (G10-LN) completed; T = 0 beside them; floors on the critic's target
+for s in 1 2; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed "$s" --name T0-G10 \
+    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+done
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed 2 --name G10-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{}'
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed 2 --name BC \
+  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+for s in 0 1 2; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed "$s" --name T0-G10 \
+    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+done
+for s in 0 1 2; do
+  for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name G10-LN \
+      --rules noisefree,obsnoise,best10 --kwargs '{}'
+  done
+done
+# the bootstrapped minimum floored at the lowest value of any policy (TF), the goal switches as terminals (GS), the
+# target floored at the data's return-to-go (MC)
+for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name TF-LN \
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "auto"}'
+done
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name GS-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switch_terminal": true}'
+for d in pointmaze/umaze-v0 hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name MC-LN \
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns"}'
+done
+"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --eval-freq 1000 --out "$OUT/ipMC/s0" \
+  --extra '{"target_q_floor": "returns"}'
+# why the pendulum fails: the critic's greedy action against the actor's along one episode
+"$PY" experiments/policy_quality/q_landscape.py --model "$OUT/pB/s0/model.zip"
+"$PY" experiments/policy_quality/q_landscape.py --model "$OUT/ipL2/s0/model.zip"

@@ -21,7 +21,7 @@ import json
 import os
 import pathlib
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeAlias
 
@@ -102,6 +102,9 @@ def default_cache_dir() -> pathlib.Path:
         return pathlib.Path(os.environ["SB3_POLA_CACHE_DIR"])
     xdg = os.environ.get("XDG_CACHE_HOME")
     return (pathlib.Path(xdg) if xdg else pathlib.Path.home() / ".cache") / "sb3_pola"
+
+
+GoalRewardFn: TypeAlias = "Callable[[np.ndarray, np.ndarray], np.ndarray]"
 
 
 @dataclass
@@ -188,15 +191,37 @@ class OfflineDataset:
         goal = key_slice(space, "desired_goal")
         return np.any(self.observations[:, goal] != self.next_observations[:, goal], axis=1)
 
-    def with_goal_switches_terminal(self) -> OfflineDataset:
-        """A copy whose ``dones`` are also 1 at :meth:`goal_switches`: each goal is an episode of its own, ended when it
-        is reached, so values are not bootstrapped from the next goal's states."""
-        dones = np.maximum(self.dones, self.goal_switches().astype(self.dones.dtype))
-        tag = "+goal-switches-terminal"
-        fingerprint = (
-            self.fingerprint if self.fingerprint is None or self.fingerprint.endswith(tag) else self.fingerprint + tag
-        )
-        return dataclasses.replace(self, dones=dones, fingerprint=fingerprint)
+    def with_goal_switches(self, mode: str, reward_fn: GoalRewardFn | None = None) -> OfflineDataset:
+        """A copy in which no value is bootstrapped across a :meth:`goal_switches` transition.
+
+        :param mode: ``"terminal"``: ``dones`` 1 there, each goal an episode of its own that ends when it is reached.
+            ``"relabel"`` (hindsight relabelling, as HER): the transition keeps its own goal in the next observation
+            and its reward is ``reward_fn(next achieved_goal, desired_goal)``, so the step after reaching a goal
+            shows what staying there is worth, the one thing the mazes' data never show
+        :param reward_fn: the env's reward of goals, batched (``GoalEnv.compute_reward`` without ``info``), for
+            ``"relabel"``
+        """
+        switches = self.goal_switches()
+        tag = f"+goal-switches-{mode}"
+        keep = self.fingerprint is None or self.fingerprint.endswith(tag)
+        fingerprint = self.fingerprint if keep else f"{self.fingerprint}{tag}"
+        if mode == "terminal":
+            dones = np.maximum(self.dones, switches.astype(self.dones.dtype))
+            return dataclasses.replace(self, dones=dones, fingerprint=fingerprint)
+        if mode != "relabel":
+            raise ValueError(f"mode must be 'terminal' or 'relabel', got {mode!r}")
+        if reward_fn is None:
+            raise ValueError("relabelling goal switches needs the env's reward of goals (reward_fn)")
+        if not switches.any():
+            return self
+        assert self.dict_observation_space is not None
+        goal = key_slice(self.dict_observation_space, "desired_goal")
+        achieved = key_slice(self.dict_observation_space, "achieved_goal")
+        next_obs, rewards = self.next_observations.copy(), self.rewards.copy()
+        next_obs[switches, goal] = self.observations[switches, goal]
+        relabelled = reward_fn(next_obs[switches, achieved], next_obs[switches, goal])
+        rewards[switches] = np.asarray(relabelled, dtype=rewards.dtype).reshape(-1)
+        return dataclasses.replace(self, next_observations=next_obs, rewards=rewards, fingerprint=fingerprint)
 
     def returns_to_go(self, gamma: float) -> np.ndarray:
         """``[N]`` float64 discounted return from each transition to its episode's end, ``sum_k gamma^k r_{t+k}``.

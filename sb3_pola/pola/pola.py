@@ -9,6 +9,7 @@ import pathlib
 from collections.abc import Callable, Iterator
 from typing import Any, ClassVar, TypeVar
 
+import numpy as np
 import torch as th
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, ReplayBufferSamples, Schedule
@@ -17,7 +18,7 @@ from torch.nn.utils import clip_grad_norm_
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.compile import CompiledLoss
-from sb3_pola.common.datasets import DatasetError, DatasetLocation, OfflineDataset, resolve_dataset_path
+from sb3_pola.common.datasets import DatasetError, DatasetLocation, OfflineDataset, make_env, resolve_dataset_path
 from sb3_pola.common.diffusion import BETA_SCHEDULES, PREDICTION_TYPES
 from sb3_pola.common.dynamics import check_dynamics_kwargs
 from sb3_pola.common.dynamics_cache import cache_key, data_fingerprint, fit_or_load
@@ -44,6 +45,7 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
 ETA_GATES = (None, "critic_maturity")
+GOAL_SWITCHES = (None, "terminal", "relabel")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
 DEFAULT_LEARNING_RATE = cosine_schedule(1e-3)  # Diffusion-QL's cosine decay; the imitation screens of #23
 GRADIENT_RATIO_FREQ = 100  # gradient steps between two measurements of train/q_bc_grad_ratio
@@ -60,6 +62,11 @@ PAPER_FORM: dict[str, Any] = {
     "critic_layer_norm": False,
     "eta_gate": None,
 }
+
+
+def _goal_reward(compute_reward: Callable[..., Any], achieved: np.ndarray, desired: np.ndarray) -> np.ndarray:
+    """A GoalEnv's ``compute_reward`` over a batch of goals (its ``info`` unused by the mazes' sparse reward)."""
+    return np.asarray(compute_reward(achieved, desired, {}), dtype=np.float32)
 
 
 def _dataset_source(dataset: Any) -> str | None:
@@ -83,7 +90,7 @@ def check_pola_arguments(
     lookahead_normalization: str,
     q_scale_floor: float | str | None,
     target_q_floor: float | str | None,
-    goal_switch_terminal: bool,
+    goal_switches: str | None,
     critic_diversity: float,
     critic_diversity_inputs: str,
     lookahead_uncertainty_penalty: float,
@@ -125,7 +132,7 @@ def check_pola_arguments(
         check_choice("target_q_floor", target_q_floor, (None, "auto", "returns"))
     else:
         check_float("target_q_floor", target_q_floor)
-    check_choice("goal_switch_terminal", goal_switch_terminal, (False, True))
+    check_choice("goal_switches", goal_switches, GOAL_SWITCHES)
     check_float("critic_diversity", critic_diversity, low=0.0)
     check_choice("critic_diversity_inputs", critic_diversity_inputs, CRITIC_DIVERSITY_INPUTS)
     if critic_diversity > 0 and n_critics < 2:
@@ -225,12 +232,13 @@ class POLA(OfflineAlgorithm):
         at the data starts at the data's values instead of climbing to them one target update at a time, and on sparse
         rewards the value of reaching a goal is there from the first step. A float: that floor. ``None``: no floor (the
         paper; default)
-    :param goal_switch_terminal: on goal-conditioned data (a ``desired_goal`` in the observations), treat each
-        transition where the goal changes as terminal
-        (:meth:`~sb3_pola.common.datasets.OfflineDataset.with_goal_switches_terminal`): the mazes' collectors draw a
-        new goal the step the old one is reached, so without it the critic bootstraps the reaching step from a
-        state whose goal is elsewhere, and no transition shows staying at a goal. ``False``: the data's own
-        terminations (default)
+    :param goal_switches: what to do where a goal-conditioned dataset's ``desired_goal`` changes between a
+        transition's observations (:meth:`~sb3_pola.common.datasets.OfflineDataset.goal_switches`): the mazes'
+        collectors draw a new goal the step the old one is reached, so the critic bootstraps the step after reaching a
+        goal from a state whose goal is elsewhere, and no transition shows staying at a goal, which is what the
+        maze's evaluation pays for. ``"terminal"``: those transitions end their goal's episode; ``"relabel"``: they
+        keep their own goal and the env's reward of it (hindsight relabelling, the env's ``compute_reward``);
+        ``None``: the data as recorded (default)
     :param critic_diversity: weight ``eta_ES`` of EDAC's ensemble-similarity term added to the critic loss
         (:func:`ensemble_similarity`): it decorrelates the members' action gradients at the data, so that they
         disagree off it and the minimum over the ensemble (targets) and its top-K (eq. 4) are pessimistic where the
@@ -327,7 +335,7 @@ class POLA(OfflineAlgorithm):
         lookahead_normalization: str = "first",
         q_scale_floor: float | str | None = None,
         target_q_floor: float | str | None = None,
-        goal_switch_terminal: bool = False,
+        goal_switches: str | None = None,
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
@@ -367,7 +375,7 @@ class POLA(OfflineAlgorithm):
             lookahead_normalization=lookahead_normalization,
             q_scale_floor=q_scale_floor,
             target_q_floor=target_q_floor,
-            goal_switch_terminal=goal_switch_terminal,
+            goal_switches=goal_switches,
             critic_diversity=critic_diversity,
             critic_diversity_inputs=critic_diversity_inputs,
             lookahead_uncertainty_penalty=lookahead_uncertainty_penalty,
@@ -387,7 +395,7 @@ class POLA(OfflineAlgorithm):
             dynamics_fit_kwargs=dynamics_fit_kwargs,
         )
         # read while the base class loads the dataset (_prepare_offline_data), so set before it
-        self.goal_switch_terminal = goal_switch_terminal
+        self.goal_switches = goal_switches
         super().__init__(
             policy,
             env,
@@ -531,7 +539,17 @@ class POLA(OfflineAlgorithm):
         return ["policy", "actor.optimizer", "critic.optimizer"], []
 
     def _prepare_offline_data(self, data: OfflineDataset) -> OfflineDataset:
-        return data.with_goal_switches_terminal() if self.goal_switch_terminal else data
+        if self.goal_switches is None or not data.goal_switches().any():
+            return data
+        reward_fn = None
+        if self.goal_switches == "relabel":
+            env = make_env(data)
+            compute_reward = getattr(env.unwrapped, "compute_reward", None)
+            env.close()
+            if compute_reward is None:
+                raise ValueError(f"goal_switches='relabel' needs an env with compute_reward (GoalEnv); {data.env_id} has none")
+            reward_fn = functools.partial(_goal_reward, compute_reward)
+        return data.with_goal_switches(self.goal_switches, reward_fn)
 
     # ------------------------------------------------------------------ dynamics model
     def _before_training(self, progress_bar: bool = False) -> None:
