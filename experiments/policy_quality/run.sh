@@ -207,7 +207,7 @@ for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
     --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "auto"}'
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name GS-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switch_terminal": true}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "terminal"}'  # first run as goal_switch_terminal=True
 for d in pointmaze/umaze-v0 hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name MC-LN \
     --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns"}'
@@ -217,3 +217,10 @@ done
 # why the pendulum fails: the critic's greedy action against the actor's along one episode
 "$PY" experiments/policy_quality/q_landscape.py --model "$OUT/pB/s0/model.zip"
 "$PY" experiments/policy_quality/q_landscape.py --model "$OUT/ipL2/s0/model.zip"
+# the goal switches relabelled with the env's reward of the old goal (GR), and with the return floor (GRMC)
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name GR-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "relabel"}'
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name GRMC-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "relabel", "target_q_floor": "returns"}'
+# does a policy stay at the goal once there
+"$PY" experiments/policy_quality/goal_stay.py "$OUT"/pointmaze_umaze-v0/{G10-LN,TF-LN,MC-LN}/seed0.zip "$OUT"/pointmaze_umaze-v0/BC/seed1.zip
