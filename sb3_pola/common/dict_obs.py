@@ -40,7 +40,7 @@ def key_slice(space: spaces.Dict, key: str) -> slice:
     """The columns of ``key`` in the flattened vector (the space's key order, each key C-order)."""
     start = 0
     for name, sub in space.spaces.items():
-        size = int(np.prod(sub.shape))
+        size = int(np.prod(sub.shape or ()))
         if name == key:
             return slice(start, start + size)
         start += size
