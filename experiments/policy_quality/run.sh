@@ -208,7 +208,7 @@ for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name GS-LN \
   --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "terminal"}'  # first run as goal_switch_terminal=True
-for d in pointmaze/umaze-v0 hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+for d in pointmaze/umaze-v0 hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name MC-LN \
     --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns"}'
 done
