@@ -36,8 +36,8 @@ def test_eta_schedule_is_followed_during_learn(pendulum_path, tmp_path):
     etas = []
     real_update = model._update
 
-    def spy(batch):
-        stats = real_update(batch)
+    def spy(batch, returns=None):
+        stats = real_update(batch, returns)
         etas.append(float(stats["eta"]))
         return stats
 
