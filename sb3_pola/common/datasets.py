@@ -201,19 +201,19 @@ class OfflineDataset:
         :param reward_fn: the env's reward of goals, batched (``GoalEnv.compute_reward`` without ``info``), for
             ``"relabel"``
         """
+        if mode not in ("terminal", "relabel"):
+            raise ValueError(f"mode must be 'terminal' or 'relabel', got {mode!r}")
         switches = self.goal_switches()
+        if not switches.any():
+            return self
         tag = f"+goal-switches-{mode}"
         keep = self.fingerprint is None or self.fingerprint.endswith(tag)
         fingerprint = self.fingerprint if keep else f"{self.fingerprint}{tag}"
         if mode == "terminal":
             dones = np.maximum(self.dones, switches.astype(self.dones.dtype))
             return dataclasses.replace(self, dones=dones, fingerprint=fingerprint)
-        if mode != "relabel":
-            raise ValueError(f"mode must be 'terminal' or 'relabel', got {mode!r}")
         if reward_fn is None:
             raise ValueError("relabelling goal switches needs the env's reward of goals (reward_fn)")
-        if not switches.any():
-            return self
         assert self.dict_observation_space is not None
         goal = key_slice(self.dict_observation_space, "desired_goal")
         achieved = key_slice(self.dict_observation_space, "achieved_goal")

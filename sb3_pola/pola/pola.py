@@ -556,18 +556,18 @@ class POLA(OfflineAlgorithm):
         if self.q_scale_floor_value is None:  # "auto": the value scale of the dataset's rewards
             rewards = self._setup_offline_data().rewards
             self.q_scale_floor_value = float(rewards.abs().mean()) / (1.0 - self.gamma)
-        if self.target_q_floor == "returns" and self._data_returns is None:
-            self._setup_offline_data()
-            assert self._offline_data is not None
-            returns = self._offline_data.returns_to_go(self.gamma)
-            self._data_returns = th.as_tensor(returns, dtype=th.float32, device=self.device)  # [N]
         if self.target_q_floor == "auto" and self.target_q_floor_value is None:
             self.target_q_floor_value = value_lower_bound(self._setup_offline_data().rewards, self.gamma)
-        if self.eta_gate == "critic_maturity" and self.data_value is None:
+        floor_needs = self.target_q_floor == "returns" and self._data_returns is None
+        gate_needs = self.eta_gate == "critic_maturity" and self.data_value is None
+        if floor_needs or gate_needs:  # the data's returns-to-go, computed once for both
             self._setup_offline_data()
             assert self._offline_data is not None
             returns = self._offline_data.returns_to_go(self.gamma)
-            self.data_value, self.data_value_floor = float(returns.mean()), float(returns.min())
+            if floor_needs:
+                self._data_returns = th.as_tensor(returns, dtype=th.float32, device=self.device)  # [N]
+            if gate_needs:
+                self.data_value, self.data_value_floor = float(returns.mean()), float(returns.min())
         dynamics = self.policy.dynamics
         if dynamics is None:
             return
