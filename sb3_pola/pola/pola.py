@@ -90,6 +90,7 @@ def check_pola_arguments(
     lookahead_normalization: str,
     q_scale_floor: float | str | None,
     target_q_floor: float | str | None,
+    reward_scale: float,
     goal_switches: str | None,
     critic_diversity: float,
     critic_diversity_inputs: str,
@@ -132,6 +133,7 @@ def check_pola_arguments(
         check_choice("target_q_floor", target_q_floor, (None, "auto", "returns"))
     else:
         check_float("target_q_floor", target_q_floor)
+    check_float("reward_scale", reward_scale, low=0.0, low_open=True)
     check_choice("goal_switches", goal_switches, GOAL_SWITCHES)
     check_float("critic_diversity", critic_diversity, low=0.0)
     check_choice("critic_diversity_inputs", critic_diversity_inputs, CRITIC_DIVERSITY_INPUTS)
@@ -232,6 +234,11 @@ class POLA(OfflineAlgorithm):
         at the data starts at the data's values instead of climbing to them one target update at a time, and on sparse
         rewards the value of reaching a goal is there from the first step. A float: that floor. ``None``: no floor (the
         paper; default)
+    :param reward_scale: factor on the data's rewards as the critic learns them (as d3rlpy's reward scaler; the
+        dynamics model keeps the raw rewards). The Q term is divided by ``mean |Q|``, so the scale only changes how
+        fast the critic can fit: Adam moves its weights by about the learning rate a step, so an output of a few
+        hundred (HalfCheetah's returns-to-go) takes thousands of steps to reach, while Q's dependence on the action is
+        a small part of it. Q, its targets and the floors are in the scaled units. Default ``1``
     :param goal_switches: what to do where a goal-conditioned dataset's ``desired_goal`` changes between a
         transition's observations (:meth:`~sb3_pola.common.datasets.OfflineDataset.goal_switches`): the mazes'
         collectors draw a new goal the step the old one is reached, so the critic bootstraps the step after reaching a
@@ -335,6 +342,7 @@ class POLA(OfflineAlgorithm):
         lookahead_normalization: str = "first",
         q_scale_floor: float | str | None = None,
         target_q_floor: float | str | None = None,
+        reward_scale: float = 1.0,
         goal_switches: str | None = None,
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
@@ -375,6 +383,7 @@ class POLA(OfflineAlgorithm):
             lookahead_normalization=lookahead_normalization,
             q_scale_floor=q_scale_floor,
             target_q_floor=target_q_floor,
+            reward_scale=reward_scale,
             goal_switches=goal_switches,
             critic_diversity=critic_diversity,
             critic_diversity_inputs=critic_diversity_inputs,
@@ -425,6 +434,7 @@ class POLA(OfflineAlgorithm):
         self.target_q_floor_value: float | None = (
             None if target_q_floor in (None, "auto", "returns") else float(target_q_floor)
         )
+        self.reward_scale = reward_scale
         # "returns": the dataset's discounted return-to-go of every transition, [N], set once the data are loaded
         self._data_returns: th.Tensor | None = None
         self.critic_diversity = critic_diversity
@@ -554,16 +564,17 @@ class POLA(OfflineAlgorithm):
     # ------------------------------------------------------------------ dynamics model
     def _before_training(self, progress_bar: bool = False) -> None:
         if self.q_scale_floor_value is None:  # "auto": the value scale of the dataset's rewards
-            rewards = self._setup_offline_data().rewards
+            rewards = self._setup_offline_data().rewards * self.reward_scale
             self.q_scale_floor_value = float(rewards.abs().mean()) / (1.0 - self.gamma)
         if self.target_q_floor == "auto" and self.target_q_floor_value is None:
-            self.target_q_floor_value = value_lower_bound(self._setup_offline_data().rewards, self.gamma)
+            rewards = self._setup_offline_data().rewards * self.reward_scale
+            self.target_q_floor_value = value_lower_bound(rewards, self.gamma)
         floor_needs = self.target_q_floor == "returns" and self._data_returns is None
         gate_needs = self.eta_gate == "critic_maturity" and self.data_value is None
         if floor_needs or gate_needs:  # the data's returns-to-go, computed once for both
             self._setup_offline_data()
             assert self._offline_data is not None
-            returns = self._offline_data.returns_to_go(self.gamma)
+            returns = self._offline_data.returns_to_go(self.gamma) * self.reward_scale  # in the critic's units
             if floor_needs:
                 self._data_returns = th.as_tensor(returns, dtype=th.float32, device=self.device)  # [N]
             if gate_needs:
@@ -632,7 +643,7 @@ class POLA(OfflineAlgorithm):
         ``returns``: ``[B]`` the data's discounted returns-to-go of the batch's transitions (``target_q_floor="returns"``)
         """
         obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
-        rewards, dones = batch.rewards.flatten(), batch.dones.flatten()
+        rewards, dones = batch.rewards.flatten() * self.reward_scale, batch.dones.flatten()
 
         # critic: TD regression on the pessimistic target (section IV)
         critic_loss, critic_stats = self._critic_loss_fn(obs, actions, next_obs, rewards, dones, returns)
