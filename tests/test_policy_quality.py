@@ -443,3 +443,32 @@ def test_target_q_floor_returns_floors_the_target_at_the_datas_return_to_go():
     model._critic_loss_fn = lambda *a: calls.append(a[-1]) or original(*a)
     model.train(1, batch_size=16)
     assert calls[0] is not None and calls[0].shape == (16,)
+
+
+def test_reward_scale_puts_the_critic_its_targets_and_floors_in_scaled_units():
+    data = synthetic_dataset(300, 3, 2, seed=2)
+    gamma = 0.99
+    plain = model_on_dataset(data, **light(rollout_length=0, target_q_floor="returns", q_scale_floor="auto"))
+    scaled = model_on_dataset(
+        data, **light(rollout_length=0, target_q_floor="returns", q_scale_floor="auto", reward_scale=0.1)
+    )
+    assert plain.reward_scale == 1.0
+    for m in (plain, scaled):
+        m._before_training()
+    returns = data.returns_to_go(gamma)
+    np.testing.assert_allclose(scaled._data_returns.cpu().numpy(), 0.1 * returns, rtol=1e-5, atol=1e-6)
+    assert scaled.data_value == pytest.approx(0.1 * plain.data_value, rel=1e-5)
+    assert scaled.data_value_floor == pytest.approx(0.1 * plain.data_value_floor, rel=1e-5)
+    assert scaled.q_scale_floor_value == pytest.approx(0.1 * plain.q_scale_floor_value, rel=1e-5)
+    # the critic sees the scaled rewards; the dynamics model's data are left as they are
+    seen = []
+    original = scaled._critic_loss_fn
+    scaled._critic_loss_fn = lambda *a: seen.append(a[3]) or original(*a)
+    buffer = scaled._setup_offline_data()
+    batch = buffer.sample(16)
+    scaled._update(batch)
+    np.testing.assert_allclose(seen[0].cpu().numpy(), 0.1 * batch.rewards.flatten().cpu().numpy(), rtol=1e-6)
+    np.testing.assert_allclose(buffer.rewards.flatten().cpu().numpy(), data.rewards, rtol=1e-6)
+    for bad in (0.0, -1.0):
+        with pytest.raises(ValueError, match="reward_scale"):
+            model_on_dataset(data, **light(reward_scale=bad))
