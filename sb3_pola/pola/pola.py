@@ -563,11 +563,10 @@ class POLA(OfflineAlgorithm):
 
     # ------------------------------------------------------------------ dynamics model
     def _before_training(self, progress_bar: bool = False) -> None:
+        rewards = self._setup_offline_data().rewards * self.reward_scale  # in the critic's units
         if self.q_scale_floor_value is None:  # "auto": the value scale of the dataset's rewards
-            rewards = self._setup_offline_data().rewards * self.reward_scale
             self.q_scale_floor_value = float(rewards.abs().mean()) / (1.0 - self.gamma)
         if self.target_q_floor == "auto" and self.target_q_floor_value is None:
-            rewards = self._setup_offline_data().rewards * self.reward_scale
             self.target_q_floor_value = value_lower_bound(rewards, self.gamma)
         floor_needs = self.target_q_floor == "returns" and self._data_returns is None
         gate_needs = self.eta_gate == "critic_maturity" and self.data_value is None
