@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch as th
 from torch import nn
 
-from sb3_pola.common.torch_layers import StateProductsExtractor, vectorized_mlp
+from sb3_pola.common.torch_layers import StateProductsExtractor, VectorizedLinear, vectorized_mlp
 
 
 class EnsembleCritic(nn.Module):
@@ -35,6 +35,13 @@ class EnsembleCritic(nn.Module):
         self.n_critics = n_critics
         in_dim = features_extractor.features_dim + action_dim
         self.q_net = vectorized_mlp(in_dim, 1, net_arch, n_critics, activation_fn, layer_norm=layer_norm)
+
+    @property
+    def output_layer(self) -> VectorizedLinear:
+        """The members' last linear layer (its bias ``[N, 1, 1]`` sets where Q starts)."""
+        layer = self.q_net[-1]
+        assert isinstance(layer, VectorizedLinear)
+        return layer
 
     def forward(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """Q-values of every member: ``[B, obs], [B, A] -> [N, B]``."""

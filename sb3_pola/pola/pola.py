@@ -91,6 +91,7 @@ def check_pola_arguments(
     q_scale_floor: float | str | None,
     target_q_floor: float | str | None,
     reward_scale: float,
+    critic_init_value: float | str | None,
     goal_switches: str | None,
     critic_diversity: float,
     critic_diversity_inputs: str,
@@ -134,6 +135,10 @@ def check_pola_arguments(
     else:
         check_float("target_q_floor", target_q_floor)
     check_float("reward_scale", reward_scale, low=0.0, low_open=True)
+    if critic_init_value is None or isinstance(critic_init_value, str):
+        check_choice("critic_init_value", critic_init_value, (None, "returns"))
+    else:
+        check_float("critic_init_value", critic_init_value)
     check_choice("goal_switches", goal_switches, GOAL_SWITCHES)
     check_float("critic_diversity", critic_diversity, low=0.0)
     check_choice("critic_diversity_inputs", critic_diversity_inputs, CRITIC_DIVERSITY_INPUTS)
@@ -239,6 +244,12 @@ class POLA(OfflineAlgorithm):
         fast the critic can fit: Adam moves its weights by about the learning rate a step, so an output of a few
         hundred (HalfCheetah's returns-to-go) takes thousands of steps to reach, while Q's dependence on the action is
         a small part of it. Q, its targets and the floors are in the scaled units. Default ``1``
+    :param critic_init_value: where the critics' output starts: their last layer's bias is shifted by this value
+        before the first gradient step (members and target critics alike). ``"returns"``: the data's mean discounted
+        return-to-go (in the critic's units), so Q starts at the data's value scale and the critic only has to learn
+        how Q varies around it, instead of climbing to it at Adam's pace (a few hundred on HalfCheetah) while the actor
+        follows an action gradient that is not yet shaped. A float: that value. ``None``: the layer's own
+        initialisation (the paper)
     :param goal_switches: what to do where a goal-conditioned dataset's ``desired_goal`` changes between a
         transition's observations (:meth:`~sb3_pola.common.datasets.OfflineDataset.goal_switches`): the mazes'
         collectors draw a new goal the step the old one is reached, so the critic bootstraps the step after reaching a
@@ -343,6 +354,7 @@ class POLA(OfflineAlgorithm):
         q_scale_floor: float | str | None = None,
         target_q_floor: float | str | None = None,
         reward_scale: float = 1.0,
+        critic_init_value: float | str | None = None,
         goal_switches: str | None = None,
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
@@ -384,6 +396,7 @@ class POLA(OfflineAlgorithm):
             q_scale_floor=q_scale_floor,
             target_q_floor=target_q_floor,
             reward_scale=reward_scale,
+            critic_init_value=critic_init_value,
             goal_switches=goal_switches,
             critic_diversity=critic_diversity,
             critic_diversity_inputs=critic_diversity_inputs,
@@ -435,8 +448,10 @@ class POLA(OfflineAlgorithm):
             None if target_q_floor in (None, "auto", "returns") else float(target_q_floor)
         )
         self.reward_scale = reward_scale
+        self.critic_init_value = critic_init_value
         # "returns": the dataset's discounted return-to-go of every transition, [N], set once the data are loaded
         self._data_returns: th.Tensor | None = None
+        self._critic_init_done = False  # critic_init_value applied (once, before the first update)
         self.critic_diversity = critic_diversity
         self.critic_diversity_inputs = critic_diversity_inputs
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
@@ -570,7 +585,8 @@ class POLA(OfflineAlgorithm):
             self.target_q_floor_value = value_lower_bound(rewards, self.gamma)
         floor_needs = self.target_q_floor == "returns" and self._data_returns is None
         gate_needs = self.eta_gate == "critic_maturity" and self.data_value is None
-        if floor_needs or gate_needs:  # the data's returns-to-go, computed once for both
+        init_needs = self.critic_init_value == "returns" and self._n_updates == 0
+        if floor_needs or gate_needs or init_needs:  # the data's returns-to-go, computed once for all
             self._setup_offline_data()
             assert self._offline_data is not None
             returns = self._offline_data.returns_to_go(self.gamma) * self.reward_scale  # in the critic's units
@@ -578,6 +594,10 @@ class POLA(OfflineAlgorithm):
                 self._data_returns = th.as_tensor(returns, dtype=th.float32, device=self.device)  # [N]
             if gate_needs:
                 self.data_value, self.data_value_floor = float(returns.mean()), float(returns.min())
+            if init_needs:
+                self._shift_critic_output(float(returns.mean()))
+        if isinstance(self.critic_init_value, float | int) and self._n_updates == 0:
+            self._shift_critic_output(float(self.critic_init_value))
         dynamics = self.policy.dynamics
         if dynamics is None:
             return
@@ -596,6 +616,16 @@ class POLA(OfflineAlgorithm):
         self.dynamics_fit_info = self._fit_or_load_dynamics(fit, fit_kwargs)
         dynamics.freeze()
         self.policy.dynamics_fitted.fill_(True)
+
+    def _shift_critic_output(self, value: float) -> None:
+        """Shift the output bias of every critic member and target member by ``value`` (``critic_init_value``), once:
+        a second ``learn`` or a resumed model (``_n_updates > 0``) keeps its trained critics."""
+        if self._critic_init_done:
+            return
+        with th.no_grad():
+            for critic in (self.policy.critic, self.policy.critic_target):
+                critic.output_layer.bias.add_(value)  # [N, 1, 1]
+        self._critic_init_done = True
 
     # ------------------------------------------------------------------ the dynamics fit: its size, its cache (issue #25)
     def _sized_fit_kwargs(self, fit_kwargs: dict[str, Any], n_transitions: int) -> dict[str, Any]:
