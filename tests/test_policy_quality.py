@@ -472,3 +472,39 @@ def test_reward_scale_puts_the_critic_its_targets_and_floors_in_scaled_units():
     for bad in (0.0, -1.0):
         with pytest.raises(ValueError, match="reward_scale"):
             model_on_dataset(data, **light(reward_scale=bad))
+
+
+def test_critic_init_value_starts_q_at_the_data_mean_return_once():
+    data = synthetic_dataset(300, 3, 2, seed=3)
+    data.rewards += 10.0  # a value scale well away from the layer's own init
+    model = model_on_dataset(data, **light(rollout_length=0, critic_init_value="returns", reward_scale=0.5))
+    critic, target = model.policy.critic, model.policy.critic_target
+    before = critic.output_layer.bias.detach().clone()  # [N, 1, 1]
+    model._before_training()
+    mean_return = 0.5 * float(data.returns_to_go(model.gamma).mean())  # in the critic's units
+    assert abs(mean_return) > 1.0  # the shift is visible against the layer's own init
+    np.testing.assert_allclose(critic.output_layer.bias.detach(), before + mean_return, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(target.output_layer.bias.detach(), critic.output_layer.bias.detach(), rtol=1e-6)
+    # Q at the data starts near the data's value, not near 0
+    buffer = model._setup_offline_data()
+    batch = buffer.sample(64)
+    with th.no_grad():
+        q = critic(batch.observations, batch.actions)  # [N, B]
+    assert abs(float(q.mean()) - mean_return) < 0.1 * abs(mean_return)
+    # once: a later learn (or a resumed model) keeps the trained critics
+    model._n_updates = 5
+    model._critic_init_done = False
+    model._before_training()
+    np.testing.assert_allclose(critic.output_layer.bias.detach(), before + mean_return, rtol=1e-5, atol=1e-5)
+    # a float shifts by that value; None leaves the layer's init
+    fixed = model_on_dataset(data, **light(rollout_length=0, critic_init_value=7.0))
+    plain = model_on_dataset(data, **light(rollout_length=0))
+    assert plain.critic_init_value is None
+    before_fixed = fixed.policy.critic.output_layer.bias.detach().clone()
+    before_plain = plain.policy.critic.output_layer.bias.detach().clone()
+    fixed._before_training()
+    plain._before_training()
+    np.testing.assert_allclose(fixed.policy.critic.output_layer.bias.detach(), before_fixed + 7.0, rtol=1e-6)
+    np.testing.assert_allclose(plain.policy.critic.output_layer.bias.detach(), before_plain)
+    with pytest.raises(ValueError, match="critic_init_value"):
+        model_on_dataset(data, **light(critic_init_value="mean"))
