@@ -300,6 +300,8 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "learning_rate": 3e-4,
         "critic_layer_norm": False,
         "eta_gate": None,
+        "target_q_floor": None,
+        "critic_init_value": None,
     }
     # the Q term at the paper's strength, bounded by LayerNorm critics (#23; #12's weakened form stays an option)
     shared = {"lookahead_normalization", "q_scale_floor"}
@@ -311,6 +313,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
     assert not any(isinstance(m, th.nn.LayerNorm) for m in paper.critic.q_net)
     assert (default.critic_diversity, default.backprop_through_model) == (1.0, False)
     assert (default.eta_gate, default.eta_gate_fraction) == ("critic_maturity", 0.1)
+    assert (default.target_q_floor, default.critic_init_value) == ("returns", "returns")
     assert default.prediction_type == "sample" and default.actor.prediction_type == "sample"
     assert paper.actor.prediction_type == "epsilon"
     assert isinstance(default.learning_rate, CosineSchedule) and default.learning_rate(1.0) == pytest.approx(1e-3)
@@ -322,36 +325,37 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         assert ("critic_similarity" in model._update(model.replay_buffer.sample(32))) == on
 
 
-def test_main_job_keeps_the_papers_form():
-    """The shipped InvertedPendulum main job needs the paper's strong, early Q term (docs/results.md)."""
-    from sb3_pola.cli.run import CONFIGS
+def test_main_job_runs_the_package_defaults_and_light_paper_keeps_the_papers_form():
+    """#23: the shipped main job (`make train`, ``--config light``) is the package defaults at the light sizes; the
+    paper's form at those sizes, as the main job ran before, is ``--config light-paper``."""
+    from sb3_pola.cli.run import CONFIGS, LIGHT_SIZES, parse_args
 
-    for config in (CONFIGS["light"], CONFIGS["paper"]):
+    assert parse_args([]).config == "light"
+    assert CONFIGS["light"] is LIGHT_SIZES and CONFIGS["defaults"] is LIGHT_SIZES  # "defaults": the earlier name
+    for config in (CONFIGS["light-paper"], CONFIGS["paper"]):
         assert {key: config[key] for key in PAPER_FORM if key != "learning_rate"} == {
             key: value for key, value in PAPER_FORM.items() if key != "learning_rate"
         }
-    assert CONFIGS["light"]["learning_rate"] == 1e-3  # the light job's own, as measured
-    # the pole needs the chain's mean: the light job evaluates with the noise-free rule
-    assert CONFIGS["light"]["policy_kwargs"]["deterministic_rule"] == "noise_free"
+    assert CONFIGS["light-paper"]["learning_rate"] == 1e-3  # the light job's own, as measured
+    # the pole needs the chain's mean under the paper's form: that job evaluates with the noise-free rule
+    assert CONFIGS["light-paper"]["policy_kwargs"]["deterministic_rule"] == "noise_free"
 
 
-def test_run_config_defaults_is_the_package_defaults_at_the_light_sizes(pendulum_path):
-    """``sb3-pola run --config defaults`` (#23): the light job's sizes and budgets, every algorithmic choice the
-    package's default, so that the main job can be run with the defaults side by side with its own configuration."""
-    from sb3_pola.cli.run import CONFIGS, LIGHT_SIZES
+def test_run_config_light_is_the_package_defaults_at_the_light_sizes(pendulum_path):
+    """``sb3-pola run`` (#23): the light job's sizes and budgets, every algorithmic choice the package's default;
+    ``light-paper`` is these sizes plus the paper's form."""
+    from sb3_pola.cli.run import CONFIGS
 
-    defaults = CONFIGS["defaults"]
-    assert defaults is LIGHT_SIZES
-    assert not set(defaults) & (set(PAPER_FORM) | {"lcb_coef", "eta", "eta_gate"})
-    assert set(defaults["policy_kwargs"]) == {"net_arch"}
-    assert "mean_loss" not in defaults["dynamics_kwargs"]
-    # the light job is these sizes plus its own algorithmic choices
     light = CONFIGS["light"]
-    for key, value in defaults.items():
+    assert not set(light) & (set(PAPER_FORM) | {"lcb_coef", "eta", "eta_gate", "reward_scale"})
+    assert set(light["policy_kwargs"]) == {"net_arch"}
+    assert "mean_loss" not in light["dynamics_kwargs"]
+    paper = CONFIGS["light-paper"]
+    for key, value in light.items():
         if isinstance(value, dict):
-            assert value.items() <= light[key].items(), key
+            assert value.items() <= paper[key].items(), key
         else:
-            assert light[key] == value, key
+            assert paper[key] == value, key
 
 
 @pytest.mark.parametrize("compile_activations", [False, True])

@@ -394,12 +394,12 @@ def test_value_lower_bound_is_the_lowest_value_of_any_policy():
     assert value_lower_bound(th.tensor([-1.0, 3.0]), 1.0) == float("-inf")
 
 
-def test_target_q_floor_bounds_the_bootstrapped_minimum_and_is_off_by_default():
+def test_target_q_floor_bounds_the_bootstrapped_minimum_and_is_off_in_the_papers_form():
     data = synthetic_dataset(200, 3, 2, seed=0)
     data.rewards[:] = 0.0
     data.rewards[::50] = 1.0  # sparse: r_min = 0
-    model = model_on_dataset(data, **light(rollout_length=0))
-    assert model.target_q_floor is None and PAPER_FORM.get("target_q_floor") is None
+    model = model_on_dataset(data, **light(rollout_length=0, target_q_floor=None))
+    assert PAPER_FORM["target_q_floor"] is None
     model._before_training()
     assert model.target_q_floor_value is None
     floored = model_on_dataset(data, **light(rollout_length=0, target_q_floor="auto"))
@@ -498,8 +498,8 @@ def test_critic_init_value_starts_q_at_the_data_mean_return_once():
     np.testing.assert_allclose(critic.output_layer.bias.detach(), before + mean_return, rtol=1e-5, atol=1e-5)
     # a float shifts by that value; None leaves the layer's init
     fixed = model_on_dataset(data, **light(rollout_length=0, critic_init_value=7.0))
-    plain = model_on_dataset(data, **light(rollout_length=0))
-    assert plain.critic_init_value is None
+    plain = model_on_dataset(data, **light(rollout_length=0, critic_init_value=None))
+    assert PAPER_FORM["critic_init_value"] is None
     before_fixed = fixed.policy.critic.output_layer.bias.detach().clone()
     before_plain = plain.policy.critic.output_layer.bias.detach().clone()
     fixed._before_training()
@@ -508,3 +508,16 @@ def test_critic_init_value_starts_q_at_the_data_mean_return_once():
     np.testing.assert_allclose(plain.policy.critic.output_layer.bias.detach(), before_plain)
     with pytest.raises(ValueError, match="critic_init_value"):
         model_on_dataset(data, **light(critic_init_value="mean"))
+
+
+def test_the_defaults_floor_the_target_at_the_returns_and_start_the_critics_at_the_datas_value():
+    """#23's seventh pass: both "returns" options are the package defaults (the main job needs them), the paper's form
+    turns them off."""
+    data = synthetic_dataset(200, 3, 2, seed=4)
+    model = model_on_dataset(data, **light(rollout_length=0))
+    assert model.target_q_floor == "returns" and model.critic_init_value == "returns"
+    model._before_training()
+    assert model._data_returns is not None and model._critic_init_done
+    paper = model_on_dataset(data, **light(rollout_length=0, **PAPER_FORM))
+    paper._before_training()
+    assert paper._data_returns is None and not paper._critic_init_done

@@ -61,6 +61,8 @@ PAPER_FORM: dict[str, Any] = {
     "learning_rate": 3e-4,
     "critic_layer_norm": False,
     "eta_gate": None,
+    "target_q_floor": None,
+    "critic_init_value": None,
 }
 
 
@@ -190,20 +192,24 @@ class POLA(OfflineAlgorithm):
     MuJoCo rule for the env, or the model's learned termination head when the env is unknown)
     marks terminal contribute no Q term, and neither do any states after them.
 
-    Six defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
+    Eight defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
     ``critic_layer_norm=True`` (LayerNorm critics, as ReBRAC: they bound Q off the data, so the Q term keeps the
     paper's full strength, ``lookahead_normalization="first"`` and no floor, without the actor climbing the critic's
     extrapolation; without them that strength collapsed the locomotion actors within a CPU budget),
     ``critic_diversity=1`` (EDAC's term: without it the ensemble agreed so closely that its minimum was no
     pessimism), ``backprop_through_model=False`` (the actor steered the model into states the critic overvalued),
     ``prediction_type="sample"`` (the actor regresses the clean action: it imitates as well as a plain MSE
-    regressor, the noise target did not), a cosine learning rate from 1e-3 and ``eta_gate="critic_maturity"`` (the
-    Q term waits until the critic's Q at the data has left the pessimism bias below the data's lowest value: on
-    sparse mazes the unguarded Q term was noise that cost score). The dynamics model fits with beta-NLL
-    and ``predict(deterministic=True)`` draws one sample with the observation's own noise
-    (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``; the shipped
-    InvertedPendulum main job keeps it (with the defaults the pendulum needs the Q-ranked rule,
-    ``policy_kwargs=dict(n_action_samples=10)``, docs/results.md).
+    regressor, the noise target did not), a cosine learning rate from 1e-3, ``target_q_floor="returns"`` (the
+    critic's target floored at the data's return-to-go: within a CPU budget the bootstrapped critic sees only a few
+    dozen steps ahead, too few for the pendulum's drift or Hopper's falls), ``critic_init_value="returns"`` (the
+    critics' output starts at the data's mean return-to-go: with the floor and Q starting at 0, HalfCheetah's critic
+    spent most of the budget climbing to its targets while the actor followed it) and
+    ``eta_gate="critic_maturity"`` (the Q term is held while the critic's Q at the data is below the data's lowest
+    value: with plain targets on sparse mazes that was thousands of steps of noise; with the two ``"returns"``
+    defaults Q starts at the data's values, so the gate is open from the first step and only closes should Q
+    collapse). The dynamics model fits with beta-NLL and ``predict(deterministic=True)`` draws one sample with the
+    observation's own noise (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is
+    ``POLA(..., **PAPER_FORM)``; the shipped InvertedPendulum main job (``make train``) runs the defaults.
 
     :param policy: policy class or alias (``"MlpPolicy"``)
     :param env: env (or id) for evaluation callbacks; made from the dataset's metadata if ``None``
@@ -237,8 +243,8 @@ class POLA(OfflineAlgorithm):
         (:meth:`~sb3_pola.common.datasets.OfflineDataset.returns_to_go`; Monte-Carlo augmented targets, MCAC,
         Wilcox et al. 2022): the data's own return from ``(s, a)`` is a value the optimal policy at least reaches, so Q
         at the data starts at the data's values instead of climbing to them one target update at a time, and on sparse
-        rewards the value of reaching a goal is there from the first step. A float: that floor. ``None``: no floor (the
-        paper; default)
+        rewards the value of reaching a goal is there from the first step (default). A float: that floor. ``None``: no
+        floor (the paper)
     :param reward_scale: factor on the data's rewards as the critic learns them (as d3rlpy's reward scaler; the
         dynamics model keeps the raw rewards). The Q term is divided by ``mean |Q|``, so the scale only changes how
         fast the critic can fit: Adam moves its weights by about the learning rate a step, so an output of a few
@@ -248,7 +254,7 @@ class POLA(OfflineAlgorithm):
         before the first gradient step (members and target critics alike). ``"returns"``: the data's mean discounted
         return-to-go (in the critic's units), so Q starts at the data's value scale and the critic only has to learn
         how Q varies around it, instead of climbing to it at Adam's pace (a few hundred on HalfCheetah) while the actor
-        follows an action gradient that is not yet shaped. A float: that value. ``None``: the layer's own
+        follows an action gradient that is not yet shaped (default). A float: that value. ``None``: the layer's own
         initialisation (the paper)
     :param goal_switches: what to do where a goal-conditioned dataset's ``desired_goal`` changes between a
         transition's observations (:meth:`~sb3_pola.common.datasets.OfflineDataset.goal_switches`): the mazes'
@@ -352,9 +358,9 @@ class POLA(OfflineAlgorithm):
         eta: float | Schedule = 1.0,
         lookahead_normalization: str = "first",
         q_scale_floor: float | str | None = None,
-        target_q_floor: float | str | None = None,
+        target_q_floor: float | str | None = "returns",
         reward_scale: float = 1.0,
-        critic_init_value: float | str | None = None,
+        critic_init_value: float | str | None = "returns",
         goal_switches: str | None = None,
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
