@@ -11,7 +11,10 @@ OUT="${OUT:-outputs/policy_quality}"
 SEEDS="${SEEDS:-0}"
 mkdir -p "$OUT"
 # until 2026-12-03 the defaults weakened the Q term ("weights", floor "auto") and had plain critics: the lines of
-# 2026-12-02 name those settings, so that they reproduce on today's defaults
+# 2026-12-02 name those settings, so that they reproduce on today's defaults. Until the seventh pass (2026-12-04) the
+# defaults had no target floor nor critic start, and the main job (`sb3-pola run` without --config) was the paper's
+# form at the light sizes: the lines before it set `"target_q_floor": null, "critic_init_value": null` and
+# `--config light-paper` for that reason (`--config light` was `--config defaults` then)
 ACTOR='"prediction_type": "sample", "lr_cos": 0.001, "lookahead_normalization": "weights", "q_scale_floor": "auto", "critic_layer_norm": false'
 # the imitation screen: held-out action MSE
 for d in halfcheetah/medium-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
@@ -21,29 +24,29 @@ for s in $SEEDS; do
   for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
     # BC with the new actor, and the defaults (F1)
     "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name BC \
-      --kwargs "{$ACTOR, \"eta\": 0.0, \"rollout_length\": 0}"
-    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name F1 --kwargs "{$ACTOR}"
+      --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $ACTOR, \"eta\": 0.0, \"rollout_length\": 0}"
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name F1 --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $ACTOR}"
   done
   # the paper's Q strength with the new actor (P1), and with a lower confidence bound
   P1="$ACTOR, \"lookahead_normalization\": \"first\", \"q_scale_floor\": null"
-  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed "$s" --name P1 --kwargs "{$P1}"
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed "$s" --name P1 --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $P1}"
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed "$s" --name P1-lcb2 \
-    --kwargs "{$P1, \"lcb_coef\": 2.0}"
+    --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $P1, \"lcb_coef\": 2.0}"
   # the main job (the paper's form), and the defaults' actor with the paper's Q strength
-  "$PY" -m sb3_pola.cli run --seed "$s" --steps 6000 --out "$OUT/mainjob/s$s"
-  "$PY" -m sb3_pola.cli run --seed "$s" --steps 6000 --out "$OUT/mainjob_x0/s$s" \
-    --extra '{"lookahead_normalization": "first", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false}'
+  "$PY" -m sb3_pola.cli run --config light-paper --seed "$s" --steps 6000 --out "$OUT/mainjob/s$s"
+  "$PY" -m sb3_pola.cli run --config light-paper --seed "$s" --steps 6000 --out "$OUT/mainjob_x0/s$s" \
+    --extra '{"lookahead_normalization": "first", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false, "target_q_floor": null, "critic_init_value": null}'
 done
 # evening screen: the Q term at eta without the floor ("weights", no floor) on HalfCheetah medium and the pendulum
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name W1 \
-  --rules obsnoise,noisefree --kwargs "{$ACTOR, \"q_scale_floor\": null}"
-"$PY" -m sb3_pola.cli run --seed 0 --steps 6000 --out "$OUT/mainjob_weights/s0" \
-  --extra '{"lookahead_normalization": "weights", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false}'
+  --rules obsnoise,noisefree --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $ACTOR, \"q_scale_floor\": null}"
+"$PY" -m sb3_pola.cli run --config light-paper --seed 0 --steps 6000 --out "$OUT/mainjob_weights/s0" \
+  --extra '{"lookahead_normalization": "weights", "q_scale_floor": null, "prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false, "target_q_floor": null, "critic_init_value": null}'
 # half the paper's strength on the pendulum (eta 0.5) and on HalfCheetah medium (H1)
-"$PY" -m sb3_pola.cli run --seed 0 --steps 6000 --out "$OUT/mainjob_half/s0" \
-  --extra '{"prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false, "eta": 0.5}'
+"$PY" -m sb3_pola.cli run --config light-paper --seed 0 --steps 6000 --out "$OUT/mainjob_half/s0" \
+  --extra '{"prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false, "eta": 0.5, "target_q_floor": null, "critic_init_value": null}'
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name H1 \
-  --rules noisefree,obsnoise --kwargs "{$ACTOR, \"q_scale_floor\": null, \"lookahead_normalization\": \"first\", \"eta\": 0.5}"
+  --rules noisefree,obsnoise --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $ACTOR, \"q_scale_floor\": null, \"lookahead_normalization\": \"first\", \"eta\": 0.5}"
 # the pendulum's model at the paper's Q strength under the three rules
 "$PY" experiments/policy_quality/rules.py "$OUT/mainjob_x0/s0/model.zip" invertedpendulum/medium-v0
 # the dynamics fit under the three mean losses
@@ -52,43 +55,44 @@ done
 "$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" > "$OUT/bench_defaults_vs_paper.json"
 # ---- 2026-12-03: the Q term at the paper's strength with a lower confidence bound (D2), with its NLL fit (D3), with
 # LayerNorm critics (P1-LN, the new defaults); the pendulum at the light sizes with the package defaults
-# (`--config defaults`); every final pendulum model under three rules. P1 over the old defaults:
+# (`--config light`); every final pendulum model under three rules. P1 over the old defaults:
 P1X='"lookahead_normalization": "first", "q_scale_floor": null'
 ACTOR='"prediction_type": "sample", "lr_cos": 0.001'
 DYN='"dynamics_kwargs": {"n_members": 5, "n_elites": 3, "hidden_dim": 128, "n_layers": 3'
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-replay-v0 --seed 0 --name D2 \
-  --rules noisefree,obsnoise,sample,best10 --kwargs "{$ACTOR, $P1X, \"critic_layer_norm\": false, \"lcb_coef\": 2.0}"
+  --rules noisefree,obsnoise,sample,best10 --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $ACTOR, $P1X, \"critic_layer_norm\": false, \"lcb_coef\": 2.0}"
 # the critic-maturity gate on HalfCheetah medium (G1) and the pendulum (the main job's configuration, x0, EDAC, detached)
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name G1 \
-  --rules obsnoise,noisefree --kwargs "{$ACTOR, $P1X, \"critic_layer_norm\": false, \"eta_gate\": \"critic_maturity\"}"
+  --rules obsnoise,noisefree --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $ACTOR, $P1X, \"critic_layer_norm\": false, \"eta_gate\": \"critic_maturity\"}"
 XDB='"prediction_type": "sample", "critic_diversity": 1.0, "backprop_through_model": false'
-"$PY" -m sb3_pola.cli run --seed 0 --steps 6000 --out "$OUT/ipG/s0" --extra "{$XDB, \"eta_gate\": \"critic_maturity\"}"
+"$PY" -m sb3_pola.cli run --config light-paper --seed 0 --steps 6000 --out "$OUT/ipG/s0" --extra "{\"target_q_floor\": null, \"critic_init_value\": null, $XDB, \"eta_gate\": \"critic_maturity\"}"
 "$PY" experiments/policy_quality/rules.py "$OUT/ipG/s0/model.zip" invertedpendulum/medium-v0
 for s in 0 1 2; do  # the same with a lower confidence bound (ipL2)
-  "$PY" -m sb3_pola.cli run --seed "$s" --steps 6000 --out "$OUT/ipL2/s$s" --extra "{$XDB, \"lcb_coef\": 2.0}"
+  "$PY" -m sb3_pola.cli run --config light-paper --seed "$s" --steps 6000 --out "$OUT/ipL2/s$s" --extra "{\"target_q_floor\": null, \"critic_init_value\": null, $XDB, \"lcb_coef\": 2.0}"
 done
 for s in 0 1 2; do
-  "$PY" -m sb3_pola.cli run --config defaults --seed "$s" --steps 6000 --out "$OUT/d2/s$s" \
-    --extra "{\"critic_layer_norm\": false, $P1X, \"lcb_coef\": 2.0}"
+  "$PY" -m sb3_pola.cli run --config light --seed "$s" --steps 6000 --out "$OUT/d2/s$s" \
+    --extra "{\"target_q_floor\": null, \"critic_init_value\": null, \"critic_layer_norm\": false, $P1X, \"lcb_coef\": 2.0}"
   "$PY" experiments/policy_quality/rules.py "$OUT/d2/s$s/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
   "$PY" experiments/policy_quality/rules.py "$OUT/ipL2/s$s/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
 done
-"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/d3/s0" \
-  --extra "{\"critic_layer_norm\": false, $P1X, \"lcb_coef\": 2.0, $DYN, \"mean_loss\": \"nll\"}}"
+"$PY" -m sb3_pola.cli run --config light --seed 0 --steps 6000 --out "$OUT/d3/s0" \
+  --extra "{\"target_q_floor\": null, \"critic_init_value\": null, \"critic_layer_norm\": false, $P1X, \"lcb_coef\": 2.0, $DYN, \"mean_loss\": \"nll\"}}"
 "$PY" experiments/policy_quality/rules.py "$OUT/d3/s0/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
 # P1-LN: the new defaults (on the old defaults: P1 + critic_layer_norm)
 for s in 0 1 2; do
   for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
     "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name P1-LN \
-      --rules noisefree,obsnoise,sample,best10 --kwargs "{$ACTOR}"
+      --rules noisefree,obsnoise,sample,best10 --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $ACTOR}"
   done
 done
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name P1-LN \
-    --rules noisefree,obsnoise,best10 --kwargs "{$ACTOR}"
+    --rules noisefree,obsnoise,best10 --kwargs "{\"target_q_floor\": null, \"critic_init_value\": null, $ACTOR}"
 done
 for s in 0 1 2; do
-  "$PY" -m sb3_pola.cli run --config defaults --seed "$s" --steps 6000 --out "$OUT/l1/s$s"
+  "$PY" -m sb3_pola.cli run --config light --seed "$s" --steps 6000 --out "$OUT/l1/s$s" \
+    --extra '{"target_q_floor": null, "critic_init_value": null}'
   "$PY" experiments/policy_quality/rules.py "$OUT/l1/s$s/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
 done
 # speed: the new defaults (LayerNorm critics) beside the paper's form
@@ -96,39 +100,39 @@ done
 
 # ---- 2026-12-03, afternoon (fourth pass): over the new defaults, one seed unless the loop says otherwise
 # the pendulum, one change at a time: NLL fit (pA), constant lr (pB), no EDAC term (pN1), eta 2 (pE2)
-"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/pA/s0" --extra "{$DYN, \"mean_loss\": \"nll\"}}"
-"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/pB/s0" --extra '{"learning_rate": 0.001}'
-"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/pN1/s0" --extra '{"critic_diversity": 0.0}'
-"$PY" -m sb3_pola.cli run --config defaults --seed 0 --steps 6000 --out "$OUT/pE2/s0" --extra '{"eta": 2.0}'
+"$PY" -m sb3_pola.cli run --config light --seed 0 --steps 6000 --out "$OUT/pA/s0" --extra "{\"target_q_floor\": null, \"critic_init_value\": null, $DYN, \"mean_loss\": \"nll\"}}"
+"$PY" -m sb3_pola.cli run --config light --seed 0 --steps 6000 --out "$OUT/pB/s0" --extra '{"learning_rate": 0.001, "target_q_floor": null, "critic_init_value": null}'
+"$PY" -m sb3_pola.cli run --config light --seed 0 --steps 6000 --out "$OUT/pN1/s0" --extra '{"critic_diversity": 0.0, "target_q_floor": null, "critic_init_value": null}'
+"$PY" -m sb3_pola.cli run --config light --seed 0 --steps 6000 --out "$OUT/pE2/s0" --extra '{"eta": 2.0, "target_q_floor": null, "critic_init_value": null}'
 for m in pA pB pN1 pE2; do
   "$PY" experiments/policy_quality/rules.py "$OUT/$m/s0/model.zip" invertedpendulum/medium-v0 --rules noisefree,obsnoise,best10
 done
 # HalfCheetah without the EDAC term (N1) and at eta 2 (E2); T = 0 with the defaults (T0-LN)
 for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name N1 --rules noisefree,obsnoise,best10 \
-    --kwargs '{"critic_diversity": 0.0}'
+    --kwargs '{"critic_diversity": 0.0, "target_q_floor": null, "critic_init_value": null}'
   for s in 0 1 2; do
     "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0-LN \
-      --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+      --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
   done
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name E2 \
-  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 2.0}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 2.0, "target_q_floor": null, "critic_init_value": null}'
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name T0-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 done
 # the medium maze (dataset: sb3-pola collect --env PointMaze_Medium-v3 --kind planner --steps 100000 --seed 0 --out DATA)
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed "$s" --name P1-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": null, "critic_init_value": null}'
 done
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed "$s" --name BC \
-    --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed 0 --name T0-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 # speed: the defaults' step (EDAC's input gradients written out) beside the paper form's, eager and compiled
 "$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" > "$OUT/bench_defaults_vs_paper_explicit_eager.json"
 "$PY" -m sb3_pola.benchmarks.train_bench --compiled --only "paper hopper" "defaults hopper" "paper hopper, compiled update" \
@@ -137,17 +141,17 @@ done
 # T = 3 at T = 0's strength: the look-ahead terms' weights divided by their sum (W-LN)
 for d in pointmaze/umaze-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name W-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{"lookahead_normalization": "weights"}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"lookahead_normalization": "weights", "target_q_floor": null, "critic_init_value": null}'
 done
 
 # ---- 2026-12-03, evening (fifth pass)
 # the medium maze's T = 0 seeds 1 and 2 (seed 0 above)
 for s in 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed "$s" --name T0-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 done
 # the critic-maturity gate opening at a tenth of the data's value (G10): closed while the sparse mazes' Q sits below 0
-G10='{"eta_gate": "critic_maturity", "eta_gate_fraction": 0.1}'
+G10='{"eta_gate": "critic_maturity", "eta_gate_fraction": 0.1, "target_q_floor": null, "critic_init_value": null}'
 for d in pointmaze/umaze-v0 halfcheetah/medium-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name G10-LN \
     --rules noisefree,obsnoise,best10 --kwargs "$G10"
@@ -156,77 +160,111 @@ done
 # defaults (the lines above with explicit kwargs are the same configuration on the mazes, whose lowest value is 0)
 for s in 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name G10-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": null, "critic_init_value": null}'
 done
 # Hopper-v5 (experiments/hopper/collect.sh; this machine's collection: experiments/hopper/collect_summary_intel.json);
-# G10-LN's seed 0 on hopper/medium ran before the floor, with --kwargs '{"eta_gate": "critic_maturity", "eta_gate_fraction": 0.1}'
+# G10-LN's seed 0 on hopper/medium ran before the floor, with --kwargs '{"eta_gate": "critic_maturity", "eta_gate_fraction": 0.1, "target_q_floor": null, "critic_init_value": null}'
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed "$s" --name G10-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": null, "critic_init_value": null}'
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed "$s" --name BC \
-    --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name T0-G10 \
-  --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 for s in 0 1; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed "$s" --name G10-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": null, "critic_init_value": null}'
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed "$s" --name BC \
-    --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 done
 # d3rlpy's baselines on the same Hopper files
 "$PY" -m sb3_pola.cli peers --datasets hopper/medium-v0 hopper/medium-replay-v0 --algos bc td3bc iql --seeds 0 1 2 \
   --steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/peers_hopper"
 # BC on the U-maze on this machine (seed 1), beside the gated defaults
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 1 --name BC \
-  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 
 # ---- 2026-12-03, night (sixth pass): the defaults (G10-LN) completed; T = 0 beside them; floors on the critic's target
 for s in 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed "$s" --name T0-G10 \
-    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed 2 --name G10-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": null, "critic_init_value": null}'
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed 2 --name BC \
-  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"eta": 0.0, "rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed "$s" --name T0-G10 \
-    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
 done
 # HalfCheetah with the final gate: medium seeds 0 (the fifth pass) and 2, medium-replay seed 0 (seed 1 and medium-replay's
 # seed 2 were not run)
 for ds in halfcheetah/medium-v0:2 halfcheetah/medium-replay-v0:0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "${ds%:*}" --seed "${ds#*:}" --name G10-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": null, "critic_init_value": null}'
 done
 # the bootstrapped minimum floored at the lowest value of any policy (TF), the goal switches as terminals (GS), the
 # target floored at the data's return-to-go (MC)
 for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name TF-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "auto"}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "auto", "critic_init_value": null}'
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name GS-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "terminal"}'  # first run as goal_switch_terminal=True
+  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "terminal", "target_q_floor": null, "critic_init_value": null}'  # first run as goal_switch_terminal=True
 for d in pointmaze/umaze-v0 hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name MC-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns"}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns", "critic_init_value": null}'
 done
 for s in 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-replay-v0 --seed "$s" --name MC-LN \
-    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns"}'
+    --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns", "critic_init_value": null}'
 done
 for s in 0 1 2; do
-  "$PY" -m sb3_pola.cli run --config defaults --seed "$s" --steps 6000 --eval-freq 1000 --out "$OUT/ipMC/s$s" \
-    --extra '{"target_q_floor": "returns"}'
+  "$PY" -m sb3_pola.cli run --config light --seed "$s" --steps 6000 --eval-freq 1000 --out "$OUT/ipMC/s$s" \
+    --extra '{"target_q_floor": "returns", "critic_init_value": null}'
 done
 # why the pendulum fails: the critic's greedy action against the actor's along one episode
 "$PY" experiments/policy_quality/q_landscape.py --model "$OUT/pB/s0/model.zip"
 "$PY" experiments/policy_quality/q_landscape.py --model "$OUT/ipL2/s0/model.zip"
 # the goal switches relabelled with the env's reward of the old goal (GR), and with the return floor (GRMC)
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name GR-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "relabel"}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "relabel", "target_q_floor": null, "critic_init_value": null}'
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed 0 --name GRMC-LN \
-  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "relabel", "target_q_floor": "returns"}'
+  --rules noisefree,obsnoise,best10 --kwargs '{"goal_switches": "relabel", "target_q_floor": "returns", "critic_init_value": null}'
 # does a policy stay at the goal once there
 "$PY" experiments/policy_quality/goal_stay.py "$OUT"/pointmaze_umaze-v0/{G10-LN,TF-LN,MC-LN}/seed0.zip "$OUT"/pointmaze_umaze-v0/BC/seed1.zip
+# 2026-12-03/04 night (seventh pass). Stop 33: the return floor with a reward scale (MCR1: 0.1, MCR2: 0.01), MC on a
+# second HalfCheetah seed and on medium-replay
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 2 --name MC-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns", "critic_init_value": null}'
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-replay-v0 --seed 0 --name MC-LN \
+  --rules noisefree,obsnoise,best10 --kwargs '{"target_q_floor": "returns", "critic_init_value": null}'
+for r in 1:0.1 2:0.01; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset halfcheetah/medium-v0 --seed 0 --name "MCR${r%:*}-LN" \
+    --rules noisefree,obsnoise,best10 --kwargs "{\"target_q_floor\": \"returns\", \"critic_init_value\": null, \"reward_scale\": ${r#*:}}"
+done
+# the pendulum's main job with the floor and reward_scale 0.1, then with the floor and the critics' start at the data's
+# value (MCCI: the new defaults)
+for s in 0 1; do
+  "$PY" -m sb3_pola.cli run --config light --seed "$s" --steps 6000 --eval-freq 1000 --out "$OUT/ipMCR1/s$s" \
+    --extra '{"target_q_floor": "returns", "critic_init_value": null, "reward_scale": 0.1}'
+done
+for s in 0 1 2; do
+  "$PY" -m sb3_pola.cli run --config light --seed "$s" --steps 6000 --eval-freq 1000 --out "$OUT/ipMCCI/s$s" \
+    --extra '{"target_q_floor": "returns", "critic_init_value": "returns"}'
+done
+# MCCI (the new defaults, named) on the six datasets, 3 seeds; the medium maze with the old defaults (seed 0)
+for s in 0 1 2; do
+  for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 hopper/medium-replay-v0 \
+    pointmaze/umaze-v0 pointmaze/medium-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name MCCI-LN \
+      --rules noisefree,obsnoise --kwargs '{"target_q_floor": "returns", "critic_init_value": "returns"}'
+  done
+done
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/medium-v0 --seed 0 --name LN \
+  --rules noisefree,obsnoise --kwargs '{"target_q_floor": null, "critic_init_value": null}'
+# the main job as shipped (make train), seeds 0, 1, 2
+for s in 0 1 2; do
+  "$PY" -m sb3_pola.cli run --dataset invertedpendulum/medium-v0 --steps 6000 --seed "$s" --out "$OUT/maketrain/s$s"
+done
