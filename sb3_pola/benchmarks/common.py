@@ -23,7 +23,8 @@ TASK_SIZES: dict[str, tuple[int, int, str]] = {"hopper": (11, 3, "Hopper-v5"), "
 
 
 def make_pola(data: OfflineDataset, device: str = "cpu", seed: int = 0, **kwargs: Any) -> POLA:
-    """A POLA model on an in-memory dataset, ready for ``train``: buffer set up, dynamics frozen as initialised.
+    """A POLA model on an in-memory dataset, ready for ``train``: buffer set up, dynamics frozen as initialised, the
+    data-dependent settings of ``learn`` made (``_before_training``).
 
     The dynamics model is not fitted (its cost per step does not depend on its weights), so the
     benchmark measures the gradient step alone.
@@ -41,6 +42,9 @@ def make_pola(data: OfflineDataset, device: str = "cpu", seed: int = 0, **kwargs
     if model.policy.dynamics is not None:
         model.policy.dynamics.freeze()
         model.policy.dynamics_fitted.fill_(True)  # type: ignore[operator]
+    # what learn() sets up before the first step (the data's returns for the target floor, the gate and the critics'
+    # start), so that the timed step is the one training takes; the frozen dynamics model is not fitted
+    model._before_training()
     return model
 
 
