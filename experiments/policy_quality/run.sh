@@ -268,3 +268,15 @@ done
 for s in 0 1 2; do
   "$PY" -m sb3_pola.cli run --dataset invertedpendulum/medium-v0 --steps 6000 --seed "$s" --out "$OUT/maketrain/s$s"
 done
+# with the new defaults: the goal switches relabelled on both mazes (GRMCCI, seed 0), T = 0 on hopper/medium-replay and
+# halfcheetah/medium (T0MCCI, 3 seeds)
+for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name GRMCCI-LN --rules noisefree,obsnoise \
+    --kwargs '{"goal_switches": "relabel", "target_q_floor": "returns", "critic_init_value": "returns"}'
+done
+for s in 0 1 2; do
+  for d in hopper/medium-replay-v0 halfcheetah/medium-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0MCCI-LN --rules noisefree,obsnoise \
+      --kwargs '{"rollout_length": 0, "target_q_floor": "returns", "critic_init_value": "returns"}'
+  done
+done
