@@ -591,7 +591,7 @@ class POLA(OfflineAlgorithm):
             self.target_q_floor_value = value_lower_bound(rewards, self.gamma)
         floor_needs = self.target_q_floor == "returns" and self._data_returns is None
         gate_needs = self.eta_gate == "critic_maturity" and self.data_value is None
-        init_needs = self.critic_init_value == "returns" and self._n_updates == 0
+        init_needs = self.critic_init_value == "returns" and self._n_updates == 0 and not self._critic_init_done
         if floor_needs or gate_needs or init_needs:  # the data's returns-to-go, computed once for all
             self._setup_offline_data()
             assert self._offline_data is not None
