@@ -7,6 +7,7 @@ import pathlib
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 from helpers import light_kwargs, record_random_dataset
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -220,3 +221,32 @@ def test_no_goal_switches_without_a_desired_goal() -> None:
     data = synthetic_dataset(50, 3, 2, seed=0)
     assert not data.goal_switches().any()
     np.testing.assert_array_equal(data.with_goal_switches("terminal").dones, data.dones)
+
+
+@pytest.mark.parametrize("fixed", [True, False])
+def test_lookahead_keeps_the_desired_goal(goal_dataset: str, fixed: bool) -> None:
+    """``lookahead_fixed_goal`` (default): the states the actor sees in the look-ahead keep the batch's desired_goal,
+    whatever the dynamics model predicts for it; ``False``: the model's prediction, as for every other column."""
+    model = POLA("MlpPolicy", dataset=goal_dataset, lookahead_fixed_goal=fixed, **light_kwargs())
+    assert POLA("MlpPolicy", dataset=goal_dataset, **light_kwargs()).lookahead_fixed_goal  # the default
+    model.learn(1)
+    goal = slice(1, 2)  # achieved_goal (1 column), desired_goal (1), observation (3): the flattening order
+    assert (model._goal_mask is not None) == fixed
+    assert not fixed or model._goal_mask.nonzero().flatten().tolist() == [1]  # type: ignore[union-attr]
+    assert model.policy.dynamics is not None
+    model.policy.dynamics.step = lambda s, a: (s + 1.0, s[:, 0], th.zeros(len(s)), th.zeros(len(s)))  # type: ignore[method-assign]
+    seen: list[th.Tensor] = []
+    features = model.policy.actor_features
+
+    def record(state: th.Tensor) -> th.Tensor:
+        seen.append(state.detach().clone())
+        return features(state)
+
+    model.policy.actor_features = record  # type: ignore[method-assign]
+    obs = th.as_tensor(model.offline_data.observations[:8], dtype=th.float32)
+    model._lookahead_q_loss(obs, features(obs))
+    assert len(seen) == model.rollout_length  # the look-ahead's states s_{t+1}, ..., s_{t+T}
+    for i, state in enumerate(seen, start=1):
+        np.testing.assert_allclose(state[:, goal], obs[:, goal] + (0.0 if fixed else i))
+        others = [0, 2, 3, 4]
+        np.testing.assert_allclose(state[:, others], obs[:, others] + i)

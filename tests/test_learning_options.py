@@ -302,6 +302,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "eta_gate": None,
         "target_q_floor": None,
         "critic_init_value": None,
+        "lookahead_fixed_goal": False,
     }
     # the Q term at the paper's strength, bounded by LayerNorm critics (#23; #12's weakened form stays an option)
     shared = {"lookahead_normalization", "q_scale_floor"}

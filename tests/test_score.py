@@ -214,9 +214,10 @@ def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.P
     # the paper's form changed it (cpu: cd99bea051, paper: f8a0da1694 before #12; 05ed254249, 6863b1ac8a before #23;
     # 46209b7d80, 824efa1128 before #23's LayerNorm critics; c8dd8105f2, 4c8e7685a9 before #23's maturity gate, whose
     # explicit eta_gate=None in PAPER_FORM changes the paper's too; 08455f37e6, 97f527da8d before #23's "returns" floor
-    # and critic start), so that a folder of the old defaults is not resumed under the new ones
+    # and critic start; 7094a5d722, c1594669b0 before #23's fixed goal in the look-ahead), so that a folder of the old
+    # defaults is not resumed under the new ones
     presets = grid_variants.PRESETS
-    assert presets["cpu"].signature() == "7094a5d722" and presets["paper"].signature() == "c1594669b0"
+    assert presets["cpu"].signature() == "20c38ed775" and presets["paper"].signature() == "e9625c50e1"
     base, sampled = tmp_path / "ema", tmp_path / "stochastic"
     assert run(score_data, base, "--variants", "T1", "--seeds", "0") == 0
     assert run(score_data, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0

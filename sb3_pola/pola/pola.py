@@ -19,6 +19,7 @@ from torch.nn.utils import clip_grad_norm_
 from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.compile import CompiledLoss
 from sb3_pola.common.datasets import DatasetError, DatasetLocation, OfflineDataset, make_env, resolve_dataset_path
+from sb3_pola.common.dict_obs import key_slice
 from sb3_pola.common.diffusion import BETA_SCHEDULES, PREDICTION_TYPES
 from sb3_pola.common.dynamics import check_dynamics_kwargs
 from sb3_pola.common.dynamics_cache import cache_key, data_fingerprint, fit_or_load
@@ -63,6 +64,7 @@ PAPER_FORM: dict[str, Any] = {
     "eta_gate": None,
     "target_q_floor": None,
     "critic_init_value": None,
+    "lookahead_fixed_goal": False,
 }
 
 
@@ -103,6 +105,7 @@ def check_pola_arguments(
     critic_layer_norm: bool,
     eta_gate: str | None,
     eta_gate_fraction: float,
+    lookahead_fixed_goal: bool,
     n_diffusion_steps: int,
     beta_schedule: str,
     prediction_type: str,
@@ -154,6 +157,7 @@ def check_pola_arguments(
     check_choice("critic_layer_norm", critic_layer_norm, (False, True))
     check_choice("eta_gate", eta_gate, ETA_GATES)
     check_float("eta_gate_fraction", eta_gate_fraction, low=0.0, low_open=True)
+    check_choice("lookahead_fixed_goal", lookahead_fixed_goal, (False, True))
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
     check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
     check_choice("prediction_type", prediction_type, PREDICTION_TYPES)
@@ -298,6 +302,12 @@ class POLA(OfflineAlgorithm):
         noise (docs/results.md, issue #23's fifth pass). ``None``: ``eta`` as given (the paper)
     :param eta_gate_fraction: ``f`` of the ``"critic_maturity"`` gate: the Q term is fully open once ``Q`` has covered
         this fraction of the way from ``G_min`` to ``G``. Default ``0.1``
+    :param lookahead_fixed_goal: on goal-conditioned data (a ``desired_goal`` key), the look-ahead's predicted states
+        keep the state's own ``desired_goal``: the task does not change in imagination, as it does not in the
+        evaluation. The dynamics model fitted on the mazes' data has learned that a goal jumps once it is reached (the
+        collector's switches), so near a goal it moves the predicted goal (U-maze: by 0.2 a step, 0.58 after three,
+        beyond the goal's 0.45 radius) and the actor was trained to follow a drifting goal. Default ``True``;
+        ``False``: the model's prediction (the paper). No effect without a ``desired_goal``
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False`` (default):
         look-ahead states are detached, so each Q term only trains the action taken at its state: the actor
@@ -370,6 +380,7 @@ class POLA(OfflineAlgorithm):
         critic_layer_norm: bool = True,
         eta_gate: str | None = "critic_maturity",
         eta_gate_fraction: float = 0.1,
+        lookahead_fixed_goal: bool = True,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -412,6 +423,7 @@ class POLA(OfflineAlgorithm):
             critic_layer_norm=critic_layer_norm,
             eta_gate=eta_gate,
             eta_gate_fraction=eta_gate_fraction,
+            lookahead_fixed_goal=lookahead_fixed_goal,
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             prediction_type=prediction_type,
@@ -468,6 +480,9 @@ class POLA(OfflineAlgorithm):
         # "critic_maturity": the dataset's mean and lowest discounted return-to-go, set once the data are loaded
         self.data_value: float | None = None
         self.data_value_floor = 0.0
+        self.lookahead_fixed_goal = lookahead_fixed_goal
+        # [obs_dim] bool, the desired_goal's columns of goal-conditioned data (lookahead_fixed_goal), set by learn
+        self._goal_mask: th.Tensor | None = None
         self.backprop_through_model = backprop_through_model
         self.n_diffusion_steps = n_diffusion_steps
         self.beta_schedule = beta_schedule
@@ -562,6 +577,7 @@ class POLA(OfflineAlgorithm):
             "_sample_target",
             "_critic_loss_fn",
             "_data_returns",
+            "_goal_mask",
             "_actor_loss_fn",
             "eta_schedule",
         ]
@@ -604,6 +620,8 @@ class POLA(OfflineAlgorithm):
                 self._shift_critic_output(float(returns.mean()))
         if isinstance(self.critic_init_value, float | int) and self._n_updates == 0:
             self._shift_critic_output(float(self.critic_init_value))
+        if self.lookahead_fixed_goal and self._goal_mask is None:
+            self._goal_mask = self._desired_goal_mask()
         dynamics = self.policy.dynamics
         if dynamics is None:
             return
@@ -622,6 +640,17 @@ class POLA(OfflineAlgorithm):
         self.dynamics_fit_info = self._fit_or_load_dynamics(fit, fit_kwargs)
         dynamics.freeze()
         self.policy.dynamics_fitted.fill_(True)
+
+    def _desired_goal_mask(self) -> th.Tensor | None:
+        """``[obs_dim]`` bool, True at the ``desired_goal`` columns of a goal-conditioned dataset's flattened
+        observations; ``None`` without a ``desired_goal``."""
+        self._setup_offline_data()
+        space = None if self._offline_data is None else self._offline_data.dict_observation_space
+        if space is None or "desired_goal" not in space.spaces:
+            return None
+        mask = th.zeros(self.observation_space.shape[0], dtype=th.bool, device=self.device)  # type: ignore[index]
+        mask[key_slice(space, "desired_goal")] = True
+        return mask
 
     def _shift_critic_output(self, value: float) -> None:
         """Shift the output bias of every critic member and target member by ``value`` (``critic_init_value``), once:
@@ -816,6 +845,8 @@ class POLA(OfflineAlgorithm):
         for _ in range(horizon):
             assert policy.dynamics is not None
             next_state, _, terminal_prob, disagreement = policy.dynamics.step(state, action)
+            if self._goal_mask is not None:  # the task does not change in imagination (lookahead_fixed_goal)
+                next_state = th.where(self._goal_mask, state, next_state)
             if self._termination_fn is not None:
                 terminal = self._termination_fn(state, action, next_state).float()
             else:
