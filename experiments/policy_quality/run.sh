@@ -280,3 +280,26 @@ for s in 0 1 2; do
       --kwargs '{"rollout_length": 0, "target_q_floor": "returns", "critic_init_value": "returns"}'
   done
 done
+
+# 2026-12-04 (eighth pass). T = 0 with the seventh pass's defaults on the four datasets not yet run (T0MCCI-LN); T = 0
+# with eta = 3.94, the Q weight T = 3 has under "first" normalisation (T0E4MCCI-LN); T = 3 with "weights" normalisation
+# (T3WMCCI-LN, seed 0); the look-ahead's states keeping the desired_goal (FGMCCI-LN, the new default
+# lookahead_fixed_goal=True; the earlier maze rows ran without it, i.e. with the model's predicted goal).
+for s in 0 1 2; do
+  for d in hopper/medium-v0 pointmaze/umaze-v0 pointmaze/medium-v0 halfcheetah/medium-replay-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0MCCI-LN --rules noisefree,obsnoise \
+      --kwargs '{"rollout_length": 0, "target_q_floor": "returns", "critic_init_value": "returns"}'
+  done
+  for d in halfcheetah/medium-v0 hopper/medium-replay-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0E4MCCI-LN --rules noisefree,obsnoise \
+      --kwargs '{"rollout_length": 0, "eta": 3.94, "target_q_floor": "returns", "critic_init_value": "returns"}'
+  done
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name FGMCCI-LN --rules noisefree,obsnoise \
+      --kwargs '{"lookahead_fixed_goal": true, "target_q_floor": "returns", "critic_init_value": "returns"}'
+  done
+done
+for d in hopper/medium-v0 halfcheetah/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name T3WMCCI-LN --rules noisefree,obsnoise \
+    --kwargs '{"lookahead_normalization": "weights", "target_q_floor": "returns", "critic_init_value": "returns"}'
+done

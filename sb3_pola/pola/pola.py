@@ -196,7 +196,7 @@ class POLA(OfflineAlgorithm):
     MuJoCo rule for the env, or the model's learned termination head when the env is unknown)
     marks terminal contribute no Q term, and neither do any states after them.
 
-    Eight defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
+    Nine defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
     ``critic_layer_norm=True`` (LayerNorm critics, as ReBRAC: they bound Q off the data, so the Q term keeps the
     paper's full strength, ``lookahead_normalization="first"`` and no floor, without the actor climbing the critic's
     extrapolation; without them that strength collapsed the locomotion actors within a CPU budget),
@@ -207,13 +207,15 @@ class POLA(OfflineAlgorithm):
     critic's target floored at the data's return-to-go: within a CPU budget the bootstrapped critic sees only a few
     dozen steps ahead, too few for the pendulum's drift or Hopper's falls), ``critic_init_value="returns"`` (the
     critics' output starts at the data's mean return-to-go: with the floor and Q starting at 0, HalfCheetah's critic
-    spent most of the budget climbing to its targets while the actor followed it) and
+    spent most of the budget climbing to its targets while the actor followed it),
     ``eta_gate="critic_maturity"`` (the Q term is held while the critic's Q at the data is below the data's lowest
     value: with plain targets on sparse mazes that was thousands of steps of noise; with the two ``"returns"``
     defaults Q starts at the data's values, so the gate is open from the first step and only closes should Q
-    collapse). The dynamics model fits with beta-NLL and ``predict(deterministic=True)`` draws one sample with the
-    observation's own noise (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is
-    ``POLA(..., **PAPER_FORM)``; the shipped InvertedPendulum main job (``make train``) runs the defaults.
+    collapse) and ``lookahead_fixed_goal=True`` (on goal-conditioned data the look-ahead keeps the goal: the model
+    had learned the collectors' goal switches and moved the goal near it). The dynamics model fits with beta-NLL and
+    ``predict(deterministic=True)`` draws one sample with the observation's own noise
+    (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``; the shipped
+    InvertedPendulum main job (``make train``) runs the defaults.
 
     :param policy: policy class or alias (``"MlpPolicy"``)
     :param env: env (or id) for evaluation callbacks; made from the dataset's metadata if ``None``
