@@ -303,3 +303,9 @@ for d in hopper/medium-v0 halfcheetah/medium-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name T3WMCCI-LN --rules noisefree,obsnoise \
     --kwargs '{"lookahead_normalization": "weights", "target_q_floor": "returns", "critic_init_value": "returns"}'
 done
+# relabelling with the fixed goal, seed 0 (GRFGMCCI-LN; the screen's dynamics model is the one fitted on the data as
+# recorded, shared per dataset)
+for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name GRFGMCCI-LN --rules noisefree,obsnoise \
+    --kwargs '{"goal_switches": "relabel", "lookahead_fixed_goal": true, "target_q_floor": "returns", "critic_init_value": "returns"}'
+done
