@@ -64,12 +64,59 @@ def lookahead_q_objective(
         the top-K mean (SAC-N / DAC): pessimism that grows with the members' disagreement; ``None``: top-K (eq. 4)
     :return: the loss and the ``[T+1]`` pessimistic Q per step (masked)
     """
-    if lcb_coef is None:
-        q_top_k = q.topk(top_k, dim=0, largest=False).values.mean(dim=0)  # [T+1, B]: mean of the K smallest members
-    else:
-        q_top_k = q.mean(dim=0) - lcb_coef * q.std(dim=0)  # [T+1, B]
+    q_top_k = pessimistic_q(q, top_k, lcb_coef)  # [T+1, B]
     per_step = (alive * q_top_k).mean(dim=1)  # [T+1]
-    # scale-free Q term (Diffusion-QL): divide by the detached mean |Q| at the current states
-    q_scale = q_top_k[0].abs().mean().detach().clamp_min(max(q_scale_floor, 1e-6))
     # eq. 3 / 4: L_q = -sum_{i=0..T} gamma^i (1/K) topK_j Q_j(s_{t+i}, a_{t+i}), terms after a terminal state masked
-    return -(lookahead_weights(gamma_powers, normalization) * per_step).sum() / q_scale, per_step
+    weighted = (lookahead_weights(gamma_powers, normalization) * per_step).sum()
+    return -weighted / _q_scale(q_top_k, q_scale_floor), per_step
+
+
+def pessimistic_q(q: th.Tensor, top_k: int, lcb_coef: float | None = None) -> th.Tensor:
+    """``[T+1, B]`` pessimistic value over the ensemble's ``[N, T+1, B]``: the mean of the ``top_k`` smallest
+    members (eq. 4), or ``mean - lcb_coef * std`` over the members."""
+    if lcb_coef is None:
+        return q.topk(top_k, dim=0, largest=False).values.mean(dim=0)
+    return q.mean(dim=0) - lcb_coef * q.std(dim=0)
+
+
+def _q_scale(q_top_k: th.Tensor, q_scale_floor: float) -> th.Tensor:
+    """Scale-free Q term (Diffusion-QL): the detached mean ``|Q|`` at the current states, no lower than the floor."""
+    return q_top_k[0].abs().mean().detach().clamp_min(max(q_scale_floor, 1e-6))
+
+
+def value_expansion_objective(
+    q: th.Tensor,
+    rewards: th.Tensor,
+    alive: th.Tensor,
+    gamma_powers: th.Tensor,
+    top_k: int,
+    normalization: str = "first",
+    q_scale_floor: float = 0.0,
+    lcb_coef: float | None = None,
+) -> tuple[th.Tensor, th.Tensor]:
+    """``L_q`` with the look-ahead judged by the model's rewards: value expansions (MVE, Feinberg et al., 2018).
+
+    ``V_h = sum_{i<h} gamma^i r_i + gamma^h Q(s_{t+h}, a_{t+h})`` for ``h = 0..T``: each is an estimate of the
+    current ``Q(s_t, a_t)``, ``V_0`` being eq. 4's first term. Eq. 3 asks the critic at every predicted state;
+    here the steps before the last are judged by the predicted reward, so the critic, which never trained at a
+    model state, is asked once per expansion and discounted by ``gamma^h``. Every ``V_h`` is on ``Q(s_t, a_t)``'s
+    scale: the ``T + 1`` expansions are summed (``"first"``, the Q term weighing ``T + 1`` times its ``T = 0``
+    weight, as eq. 3's ``sum_i gamma^i`` does) or averaged (``"weights"``).
+
+    :param q: ``[N, T+1, B]`` Q-values of every member at ``(s_{t+i}, a_{t+i})``
+    :param rewards: ``[T, B]`` the model's rewards of ``(s_{t+i}, a_{t+i})``, ``i < T``, in the critic's units
+    :param alive: ``[T+1, B]`` 1 while no earlier or current look-ahead state is terminal, else 0
+    :param gamma_powers: ``[T+1]`` ``gamma^i``
+    :param top_k: number ``K`` of smallest members averaged
+    :param normalization: ``"first"`` (sum) or ``"weights"`` (mean) of the expansions
+    :param q_scale_floor: lower bound of the divisor ``mean |Q|`` at the current states
+    :param lcb_coef: lower confidence bound in place of the top-K mean (:func:`pessimistic_q`)
+    :return: the loss and the ``[T+1]`` batch means of ``V_h``
+    """
+    q_top_k = pessimistic_q(q, top_k, lcb_coef)  # [T+1, B]
+    discounted = gamma_powers[:-1, None] * alive[:-1] * rewards  # [T, B]: r_i counts while s_{t+i} is alive
+    reward_sums = th.cat([th.zeros_like(discounted[:1]), discounted.cumsum(dim=0)])  # [T+1, B]: sum_{i<h}
+    values = reward_sums + gamma_powers[:, None] * alive * q_top_k  # [T+1, B]: V_h
+    per_step = values.mean(dim=1)  # [T+1]
+    total = per_step.sum() if normalization == "first" else per_step.mean()
+    return -total / _q_scale(q_top_k, q_scale_floor), per_step

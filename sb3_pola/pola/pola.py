@@ -32,7 +32,13 @@ from sb3_pola.common.termination import TerminationFn, get_termination_fn
 from sb3_pola.common.validation import check_choice, check_float, check_float_or_schedule, check_int
 from sb3_pola.pola.export import export_policy
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
-from sb3_pola.pola.losses import ensemble_similarity, lookahead_q_objective, lookahead_weights, value_lower_bound
+from sb3_pola.pola.losses import (
+    ensemble_similarity,
+    lookahead_q_objective,
+    lookahead_weights,
+    value_expansion_objective,
+    value_lower_bound,
+)
 from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy
 
 SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
@@ -45,6 +51,7 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
 
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
+LOOKAHEAD_TARGETS = ("q", "value_expansion")
 ETA_GATES = (None, "critic_maturity")
 GOAL_SWITCHES = (None, "terminal", "relabel")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
@@ -65,6 +72,7 @@ PAPER_FORM: dict[str, Any] = {
     "target_q_floor": None,
     "critic_init_value": None,
     "lookahead_fixed_goal": False,
+    "lookahead_target": "q",
 }
 
 
@@ -106,6 +114,7 @@ def check_pola_arguments(
     eta_gate: str | None,
     eta_gate_fraction: float,
     lookahead_fixed_goal: bool,
+    lookahead_target: str,
     n_diffusion_steps: int,
     beta_schedule: str,
     prediction_type: str,
@@ -158,6 +167,7 @@ def check_pola_arguments(
     check_choice("eta_gate", eta_gate, ETA_GATES)
     check_float("eta_gate_fraction", eta_gate_fraction, low=0.0, low_open=True)
     check_choice("lookahead_fixed_goal", lookahead_fixed_goal, (False, True))
+    check_choice("lookahead_target", lookahead_target, LOOKAHEAD_TARGETS)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
     check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
     check_choice("prediction_type", prediction_type, PREDICTION_TYPES)
@@ -310,6 +320,12 @@ class POLA(OfflineAlgorithm):
         collector's switches), so near a goal it moves the predicted goal (U-maze: by 0.2 a step, 0.58 after three,
         beyond the goal's 0.45 radius) and the actor was trained to follow a drifting goal. Default ``True``;
         ``False``: the model's prediction (the paper). No effect without a ``desired_goal``
+    :param lookahead_target: how the look-ahead judges the predicted states. ``"q"`` (the paper, eq. 3; default): the
+        critic's Q at each of them. ``"value_expansion"``: the model's predicted rewards up to each of them and the
+        critic's Q there, ``V_h = sum_{i<h} gamma^i r_i + gamma^h Q(s_{t+h}, a_{t+h})`` for ``h = 0..T``
+        (MVE; :func:`~sb3_pola.pola.losses.value_expansion_objective`), each an estimate of ``Q(s_t, a_t)``: the
+        critic never trains at a model state, so its Q there is extrapolation, and the expansion discounts it by
+        ``gamma^h`` behind rewards the model was fitted on. ``lookahead_normalization`` sums or averages the expansions
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False`` (default):
         look-ahead states are detached, so each Q term only trains the action taken at its state: the actor
@@ -383,6 +399,7 @@ class POLA(OfflineAlgorithm):
         eta_gate: str | None = "critic_maturity",
         eta_gate_fraction: float = 0.1,
         lookahead_fixed_goal: bool = True,
+        lookahead_target: str = "q",
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -426,6 +443,7 @@ class POLA(OfflineAlgorithm):
             eta_gate=eta_gate,
             eta_gate_fraction=eta_gate_fraction,
             lookahead_fixed_goal=lookahead_fixed_goal,
+            lookahead_target=lookahead_target,
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             prediction_type=prediction_type,
@@ -483,6 +501,7 @@ class POLA(OfflineAlgorithm):
         self.data_value: float | None = None
         self.data_value_floor = 0.0
         self.lookahead_fixed_goal = lookahead_fixed_goal
+        self.lookahead_target = lookahead_target
         # [obs_dim] bool, the desired_goal's columns of goal-conditioned data (lookahead_fixed_goal), set by learn
         self._goal_mask: th.Tensor | None = None
         self.backprop_through_model = backprop_through_model
@@ -843,10 +862,12 @@ class POLA(OfflineAlgorithm):
         saturation = (action.detach().abs() > 0.99).float().mean()
         states, actions_, alive = [obs], [action], [th.ones(batch_size, device=obs.device)]
         disagreements: list[th.Tensor] = []  # [B] per look-ahead step, the model's doubt about s_{t+i}
+        rewards: list[th.Tensor] = []  # [B] per look-ahead step, the model's r(s_{t+i}, a_{t+i})
         state = obs
         for _ in range(horizon):
             assert policy.dynamics is not None
-            next_state, _, terminal_prob, disagreement = policy.dynamics.step(state, action)
+            next_state, reward, terminal_prob, disagreement = policy.dynamics.step(state, action)
+            rewards.append(reward * self.reward_scale)
             if self._goal_mask is not None:  # the task does not change in imagination (lookahead_fixed_goal)
                 next_state = th.where(self._goal_mask, state, next_state)
             if self._termination_fn is not None:
@@ -866,11 +887,14 @@ class POLA(OfflineAlgorithm):
         # all T + 1 critic evaluations in one ensemble call (the caller has switched off the critic's gradients)
         q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
         alive_mask = th.stack(alive)  # [T+1, B]
-        q_loss, per_step = lookahead_q_objective(
-            q.view(-1, horizon + 1, batch_size),
-            alive_mask,
-            self._gamma_powers,
-            self.top_k,
+        objective: Callable[..., tuple[th.Tensor, th.Tensor]] = lookahead_q_objective  # eq. 3/4
+        if self.lookahead_target == "value_expansion" and horizon > 0:
+            objective = functools.partial(value_expansion_objective, rewards=th.stack(rewards))  # [T, B]
+        q_loss, per_step = objective(
+            q.view(-1, horizon + 1, batch_size),  # [N, T+1, B]
+            alive=alive_mask,
+            gamma_powers=self._gamma_powers,
+            top_k=self.top_k,
             normalization=self.lookahead_normalization,
             q_scale_floor=self.q_scale_floor_value or 0.0,
             lcb_coef=self.lcb_coef,
