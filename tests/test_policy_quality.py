@@ -13,7 +13,7 @@ from sb3_pola.common.diffusion import NoiseSchedule
 from sb3_pola.common.torch_layers import vectorized_mlp
 from sb3_pola.pola import pola as pola_module
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
-from sb3_pola.pola.losses import value_lower_bound
+from sb3_pola.pola.losses import value_expansion_objective, value_lower_bound
 from sb3_pola.pola.pola import PAPER_FORM, lookahead_q_objective
 from sb3_pola.pola.policies import DiffusionActor
 
@@ -150,6 +150,56 @@ def test_lcb_replaces_the_top_k_mean():
     assert top_k.tolist() == pytest.approx([(2.0 + 4.0) / 2])
     with pytest.raises(ValueError, match="lcb_coef"):
         model_on_dataset(synthetic_dataset(100, 3, 2), **light(lcb_coef=-1.0))
+
+
+# ---------------------------------------------------------------- value expansion
+def test_value_expansion_sums_predicted_rewards_then_q():
+    """``V_h = sum_{i<h} gamma^i r_i + gamma^h Q_h`` with the ensemble's minimum (top_k=1); a terminal state ends
+    the expansion after the reward of the step into it."""
+    q = th.tensor([[[4.0], [6.0], [8.0]], [[5.0], [7.0], [2.0]]])  # [N=2, T+1=3, B=1]
+    rewards = th.tensor([[2.0], [1.0]])  # [T=2, B=1]
+    gammas = th.tensor([1.0, 0.5, 0.25])
+    loss, per_step = value_expansion_objective(q, rewards, th.ones(3, 1), gammas, top_k=1)
+    v = [4.0, 2.0 + 0.5 * 6.0, 2.0 + 0.5 * 1.0 + 0.25 * 2.0]
+    assert per_step.tolist() == pytest.approx(v)
+    assert loss.item() == pytest.approx(-sum(v) / 4.0)  # "first": summed, divided by |Q| at the current state
+    mean_loss, _ = value_expansion_objective(q, rewards, th.ones(3, 1), gammas, top_k=1, normalization="weights")
+    assert mean_loss.item() == pytest.approx(-sum(v) / 3 / 4.0)
+    _, cut = value_expansion_objective(q, rewards, th.tensor([[1.0], [1.0], [0.0]]), gammas, top_k=1)
+    assert cut.tolist() == pytest.approx([4.0, 5.0, 2.5])  # s_{t+2} terminal: r_0 + gamma r_1, no Q after it
+    # with T = 0 it is eq. 4's single term
+    first, _ = value_expansion_objective(q[:, :1], rewards[:0], th.ones(1, 1), gammas[:1], top_k=1)
+    assert first.item() == pytest.approx(lookahead_q_objective(q[:, :1], th.ones(1, 1), gammas[:1], top_k=1)[0].item())
+
+
+@pytest.mark.parametrize("target", ["q", "value_expansion"])
+def test_value_expansion_reads_the_models_reward(target: str):
+    """With ``lookahead_target="value_expansion"`` the look-ahead loss falls as the model's predicted reward rises,
+    and ``V_h`` gains ``sum_{i<h} gamma^i`` per unit of reward; eq. 3's Q-only loss does not read it."""
+    model = model_on_dataset(synthetic_dataset(200, 3, 2, seed=0), **light(lookahead_target=target, reward_scale=2.0))
+    assert model_on_dataset(synthetic_dataset(200, 3, 2, seed=0), **light()).lookahead_target == "q"  # the default
+    model.learn(1)
+    assert model.policy.dynamics is not None
+    obs = th.as_tensor(model.offline_data.observations[:16], dtype=th.float32)
+
+    def loss_with_reward(value: float) -> tuple[float, dict[str, th.Tensor]]:
+        model.policy.dynamics.step = lambda s, a: (s, th.full((len(s),), value), th.zeros(len(s)), th.zeros(len(s)))  # type: ignore[method-assign,union-attr]
+        th.manual_seed(0)
+        loss, stats = model._lookahead_q_loss(obs, model.policy.actor_features(obs))
+        return loss.item(), stats
+
+    (low, low_stats), (high, high_stats) = loss_with_reward(0.0), loss_with_reward(1.0)
+    if target == "q":
+        assert high == pytest.approx(low)
+        return
+    g = model.gamma
+    # T = 2: V_1 gains 2 (reward_scale), V_2 gains 2 (1 + gamma); the loss is -(sum_h V_h) / |Q_0|
+    assert (high_stats["lookahead_q_1"] - low_stats["lookahead_q_1"]).item() == pytest.approx(2.0, rel=1e-4)
+    assert (high_stats["lookahead_q_2"] - low_stats["lookahead_q_2"]).item() == pytest.approx(2.0 * (1 + g), rel=1e-4)
+    higher, _ = loss_with_reward(2.0)
+    assert low > high and higher - high == pytest.approx(high - low, rel=1e-3)  # linear: a better reward, a lower loss
+    with pytest.raises(ValueError, match="lookahead_target"):
+        model_on_dataset(synthetic_dataset(100, 3, 2), **light(lookahead_target="mve"))
 
 
 # ---------------------------------------------------------------- the Q-to-BC gradient ratio

@@ -115,7 +115,7 @@ def value_expansion_objective(
     """
     q_top_k = pessimistic_q(q, top_k, lcb_coef)  # [T+1, B]
     discounted = gamma_powers[:-1, None] * alive[:-1] * rewards  # [T, B]: r_i counts while s_{t+i} is alive
-    reward_sums = th.cat([th.zeros_like(discounted[:1]), discounted.cumsum(dim=0)])  # [T+1, B]: sum_{i<h}
+    reward_sums = th.cat([q_top_k.new_zeros(1, q_top_k.shape[1]), discounted.cumsum(dim=0)])  # [T+1, B]: sum_{i<h}
     values = reward_sums + gamma_powers[:, None] * alive * q_top_k  # [T+1, B]: V_h
     per_step = values.mean(dim=1)  # [T+1]
     total = per_step.sum() if normalization == "first" else per_step.mean()
