@@ -309,3 +309,20 @@ for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name GRFGMCCI-LN --rules noisefree,obsnoise \
     --kwargs '{"goal_switches": "relabel", "lookahead_fixed_goal": true, "target_q_floor": "returns", "critic_init_value": "returns"}'
 done
+
+# 2026-12-04 (ninth pass). The look-ahead judged by value expansions (lookahead_target="value_expansion", VE), with the
+# look-ahead states detached (the default) and with the gradient through the model (VEBP), seed 0; T = 0 at T = 3's Q
+# weight (T0E4MCCI-LN) on the four datasets the eighth pass had not run. Diagnostics of T = 3 against T = 0:
+# python experiments/policy_quality/lookahead_diag.py --out "$OUT"
+for d in halfcheetah/medium-v0 hopper/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name VE --rules noisefree,obsnoise \
+    --kwargs '{"lookahead_target": "value_expansion"}'
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name VEBP --rules noisefree,obsnoise \
+    --kwargs '{"lookahead_target": "value_expansion", "backprop_through_model": true}'
+done
+for s in 0 1 2; do
+  for d in hopper/medium-v0 pointmaze/umaze-v0 pointmaze/medium-v0 halfcheetah/medium-replay-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0E4MCCI-LN --rules noisefree,obsnoise \
+      --kwargs '{"rollout_length": 0, "eta": 3.94, "target_q_floor": "returns", "critic_init_value": "returns"}'
+  done
+done

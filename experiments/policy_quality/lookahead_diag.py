@@ -1,0 +1,72 @@
+"""#23: where T = 3 is behind T = 0, what the training statistics say. *Needs the screens' outputs.*
+
+Reads ``OUT/<dataset>/<name>/seed<S>/progress.csv`` that ``screen.py`` writes (``OUT``: ``outputs/policy_quality``, or
+``--out``) for the package defaults (T = 3) and T = 0, and prints per dataset the mean over seeds of the statistics
+over the last 1,000 steps: the critics' Q at the data's actions (``q_mean``) and at the actor's (``lookahead_q_0``),
+the actor's pessimistic Q at the third predicted state (``lookahead_q_3``), the ensemble's spread at the actor's
+actions over its spread at the data's, the model's disagreement at the third step and the Q term's gradient over the
+BC term's. With the scores of ``OUT/screen.jsonl`` (obs rule). ``python experiments/policy_quality/lookahead_diag.py``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import statistics
+
+import pandas as pd
+
+# dataset -> (T = 3 screen name, T = 0 screen name): the defaults of 2026-12-04 (run.sh, seventh and eighth passes)
+RUNS = {
+    "halfcheetah/medium-v0": ("MCCI-LN", "T0MCCI-LN"),
+    "halfcheetah/medium-replay-v0": ("MCCI-LN", "T0MCCI-LN"),
+    "hopper/medium-v0": ("MCCI-LN", "T0MCCI-LN"),
+    "hopper/medium-replay-v0": ("MCCI-LN", "T0MCCI-LN"),
+    "pointmaze/umaze-v0": ("FGMCCI-LN", "T0MCCI-LN"),
+    "pointmaze/medium-v0": ("FGMCCI-LN", "T0MCCI-LN"),
+}
+COLUMNS = {  # printed name -> how it is made from the last rows of progress.csv
+    "Q data": lambda d: d["train/q_mean"].mean(),
+    "Q actor": lambda d: d["train/lookahead_q_0"].mean(),
+    "Q s3": lambda d: d["train/lookahead_q_3"].mean() if "train/lookahead_q_3" in d else float("nan"),
+    "spread actor/data": lambda d: (d["train/policy_q_ensemble_std"] / d["train/q_ensemble_std"]).mean(),
+    "model u3": lambda d: d["train/lookahead_uncertainty_3"].mean() if "train/lookahead_uncertainty_3" in d else float("nan"),
+    "grad Q/BC": lambda d: d["train/q_bc_grad_ratio"].dropna().mean(),
+}
+
+
+def stats(folder: pathlib.Path) -> dict[str, float] | None:
+    runs = []
+    for path in sorted(folder.glob("seed*/progress.csv")):
+        d = pd.read_csv(path)
+        runs.append(
+            {name: float(fn(d[d["train/n_updates"] > d["train/n_updates"].max() - 1000])) for name, fn in COLUMNS.items()}
+        )
+    if not runs:
+        return None
+    return {name: statistics.mean(r[name] for r in runs) for name in COLUMNS}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default="outputs/policy_quality")
+    out = pathlib.Path(parser.parse_args().out)
+    scores: dict[tuple[str, str], list[float]] = {}
+    for line in (out / "screen.jsonl").read_text().splitlines():
+        row = json.loads(line)
+        scores.setdefault((row["dataset"], row["name"]), []).append(row["obsnoise"])
+    print("| dataset | T | score | " + " | ".join(COLUMNS) + " |")
+    print("|---|---|---|" + "---|" * len(COLUMNS))
+    for dataset, names in RUNS.items():
+        for horizon, name in zip((3, 0), names, strict=True):
+            row = stats(out / dataset.replace("/", "_") / name)
+            if row is None:
+                continue
+            seeds = scores.get((dataset, name), [])
+            score = f"{statistics.mean(seeds):.1f}" if seeds else "-"
+            print(f"| {dataset} | {horizon} | {score} | " + " | ".join(f"{v:.3g}" for v in row.values()) + " |")
+
+
+if __name__ == "__main__":
+    main()
