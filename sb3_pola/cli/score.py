@@ -98,7 +98,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--eval-rule",
         metavar="RULE",
-        help="how the evaluations during training act: ema (default: the EMA actor's noise-free chain), online, "
+        help="how the evaluations during training act: ema (default: predict(deterministic=True), the EMA actor's "
+        "chain with the observation's own noise), online, "
         "[online-]stochastic (one sample of the noisy chain), [online-]candidates<N>",
     )
     parser.add_argument(

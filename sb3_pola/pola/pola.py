@@ -72,7 +72,6 @@ PAPER_FORM: dict[str, Any] = {
     "target_q_floor": None,
     "critic_init_value": None,
     "lookahead_fixed_goal": False,
-    "lookahead_target": "q",
 }
 
 
