@@ -326,3 +326,20 @@ for s in 0 1 2; do
       --kwargs '{"rollout_length": 0, "eta": 3.94, "target_q_floor": "returns", "critic_init_value": "returns"}'
   done
 done
+# T = 3 given eta = 3.94 under "first" (the Q term ~15.5x the current-state term), seed 0: does T = 3 take more pull?
+for d in halfcheetah/medium-v0 hopper/medium-replay-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name T3E4 --rules noisefree,obsnoise \
+    --kwargs '{"eta": 3.94}'
+done
+
+# 2026-12-04 (tenth pass). The look-ahead at T = 0's Q weight: T = 3 with "weights" (the T + 1 terms' weights sum to
+# 1) and eta = 3.94, against T = 0 with eta = 3.94 (T0E4MCCI-LN above): the same total pull, spread over the predicted
+# states or not. Seed 0 on the six datasets. And the third seed of BC with the package's actor where two were run.
+for d in halfcheetah/medium-v0 hopper/medium-v0 pointmaze/umaze-v0 hopper/medium-replay-v0 halfcheetah/medium-replay-v0 pointmaze/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name T3WE4 --rules noisefree,obsnoise \
+    --kwargs '{"eta": 3.94, "lookahead_normalization": "weights"}'
+done
+for d in pointmaze/umaze-v0 halfcheetah/medium-replay-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 2 --name BC --rules noisefree,obsnoise \
+    --kwargs '{"eta": 0.0, "rollout_length": 0, "target_q_floor": null, "critic_init_value": null}'
+done
