@@ -2,7 +2,7 @@
 # #23's long runs, POLA half: the package defaults (the CPU preset's T3 variant) for 100,000 steps on hopper/medium
 # and halfcheetah/medium-replay, evaluation every 5,000 steps on 10 episodes, next to experiments/long100k/peers.sh.
 # One core; re-running resumes from the run's checkpoints. bash experiments/long100k/run.sh ["SEEDS"] ["DATASETS"]
-# VARIANTS=BC runs behaviour cloning with the package's actor (eta = 0) the same way.
+# VARIANTS picks other variants of the score grid: BC (the package's actor, eta = 0), T0 (no look-ahead).
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 "${PYTHON:-python}" -m sb3_pola.cli score --preset cpu --data-dir "${DATA:-${MINARI_DATASETS_PATH:?set DATA or MINARI_DATASETS_PATH to the folder of Minari datasets}}" \
