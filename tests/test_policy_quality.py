@@ -202,6 +202,78 @@ def test_value_expansion_reads_the_models_reward(target: str):
         model_on_dataset(synthetic_dataset(100, 3, 2), **light(lookahead_target="mve"))
 
 
+# ---------------------------------------------------------------- the critic's TD loss at model rollouts
+def _stub_model(model, reward: float, terminal_at: int | None = None) -> None:
+    """The dynamics model replaced by ``s' = s + 1``, reward ``reward``, termination on step ``terminal_at``."""
+    calls = {"n": 0}
+
+    def step(s, a):
+        terminal = th.full((len(s),), float(calls["n"] % model.rollout_length == terminal_at))
+        calls["n"] += 1
+        return s + 1.0, th.full((len(s),), reward), terminal, th.zeros(len(s))
+
+    model._termination_fn = None
+    model.policy.dynamics.step = step  # type: ignore[method-assign,union-attr]
+
+
+def test_model_td_loss_fits_the_rollouts_bellman_target():
+    """``model_td_weight``: the critic's loss gains the TD loss of ``T``-step model rollouts of the EMA actor from
+    the batch's next states: ``r + gamma (1 - done) min_j Q'_j(s', a')`` at each step, rows after an end left out,
+    and no rows from a terminal next state."""
+    data = synthetic_dataset(200, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(model_td_weight=0.5, reward_scale=2.0))
+    assert model_on_dataset(data, **light()).model_td_weight == 0.0  # the default: off
+    _stub_model(model, reward=0.25, terminal_at=0)  # the first model step ends the rollout
+    next_obs = th.as_tensor(data.next_observations[:16])
+    next_actions = th.rand(16, 2) * 2 - 1
+    dones = th.zeros(16)
+    dones[:4] = 1.0
+    model.critic_target.q_values = lambda x: th.full((model.n_critics, x.shape[-2]), 3.0)  # type: ignore[method-assign]
+    loss, stats = model._model_td_loss(next_obs, next_actions, dones)
+    # T = 2 rows per state: step 0 from (s, a) ends (target 2 * 0.25, no bootstrap); step 1 is never reached
+    with th.no_grad():
+        q = model.critic(next_obs[4:], next_actions[4:])  # [N, 12]
+    want = (q - 0.5).pow(2).mean(dim=1).sum()
+    assert loss.item() == pytest.approx(want.item(), rel=1e-5)
+    assert stats["model_q_mean"].item() == pytest.approx(q.mean().item(), rel=1e-5)
+    _stub_model(model, reward=0.25, terminal_at=None)  # no ends: every row bootstraps gamma * 3
+    th.manual_seed(0)
+    loss, _ = model._model_td_loss(next_obs, next_actions, th.zeros(16))
+    th.manual_seed(0)  # the second step's actions: the EMA actor's at s + 1, the first draw of the rollout
+    with th.no_grad():
+        second = model._sample_target(model.policy.actor_features(next_obs + 1.0))
+        q = model.critic(th.cat([next_obs, next_obs + 1.0]), th.cat([next_actions, second]))  # [N, 32]
+    want = (q - (0.5 + model.gamma * 3.0)).pow(2).mean(dim=1).sum()
+    assert loss.item() == pytest.approx(want.item(), rel=1e-5)
+    # the data's critic loss gains it, times the weight
+    batch = model._setup_offline_data().sample(16)
+    th.manual_seed(1)
+    with_term, stats = model._critic_loss(batch.observations, batch.actions, batch.next_observations,
+                                          batch.rewards.flatten(), batch.dones.flatten())
+    assert "model_q_mean" in stats
+    model.model_td_weight = 0.0
+    th.manual_seed(1)
+    without, stats = model._critic_loss(batch.observations, batch.actions, batch.next_observations,
+                                        batch.rewards.flatten(), batch.dones.flatten())
+    assert "model_q_mean" not in stats and with_term.item() > without.item()
+
+
+def test_model_td_loss_moves_q_at_model_states():
+    """Trained with the rollouts' TD loss, the critic's Q at the EMA actor's actions follows the model's reward (a
+    terminal reward of 40, far above the data's value); trained on the data alone it does not."""
+    data = synthetic_dataset(300, 3, 2, seed=0)
+
+    def q_after(weight: float) -> float:
+        model = model_on_dataset(data, **light(model_td_weight=weight, rollout_length=1, eta=0.0))
+        _stub_model(model, reward=40.0, terminal_at=0)
+        model.train(gradient_steps=300, batch_size=32)
+        obs = th.as_tensor(data.next_observations[:64])
+        with th.no_grad():
+            return model.critic(obs, model._sample_target(model.policy.actor_features(obs))).mean().item()
+
+    assert q_after(1.0) > q_after(0.0) + 5.0
+
+
 # ---------------------------------------------------------------- the Q-to-BC gradient ratio
 def test_gradient_ratio_is_logged_and_leaves_training_unchanged(monkeypatch):
     data = synthetic_dataset(400, 3, 2, seed=0)

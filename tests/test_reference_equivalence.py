@@ -344,14 +344,17 @@ def test_compiled_mish_equals_mish():
 
 
 @pytest.mark.slow  # torch.compile for minutes; the fallback path: test_compile_update_falls_back_to_eager
-@pytest.mark.parametrize("cudagraph_path, critic_diversity", [(False, 0.0), (True, 0.0), (False, 0.5)])
-def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diversity):
+@pytest.mark.parametrize(
+    "cudagraph_path, critic_diversity, model_td_weight", [(False, 0.0, 0.0), (True, 0.0, 0.0), (False, 0.5, 1.0)]
+)
+def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diversity, model_td_weight):
     """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
 
     ``cudagraph_path`` runs the CUDA code path on CPU (inductor's ``triton.cudagraphs`` option, step marks, output
     copies); inductor captures graphs only on CUDA, so this checks the plumbing, not the capture. With
     ``critic_diversity`` the critic loss holds the similarity term's input gradients written out
-    (sb3_pola.common.input_gradients), which a compiled graph differentiates once.
+    (sb3_pola.common.input_gradients), which a compiled graph differentiates once; with ``model_td_weight`` it also
+    holds the model rollouts' TD loss.
     """
     from torch._dynamo.utils import counters
 
@@ -369,6 +372,7 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diver
         policy_kwargs={"net_arch": [16]},
         dynamics_kwargs={"n_members": 2, "n_elites": 2, "hidden_dim": 8, "n_layers": 1},
         critic_diversity=critic_diversity,
+        model_td_weight=model_td_weight,
     )
     # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
     th._dynamo.reset()

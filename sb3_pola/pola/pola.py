@@ -114,6 +114,7 @@ def check_pola_arguments(
     eta_gate_fraction: float,
     lookahead_fixed_goal: bool,
     lookahead_target: str,
+    model_td_weight: float,
     n_diffusion_steps: int,
     beta_schedule: str,
     prediction_type: str,
@@ -167,6 +168,7 @@ def check_pola_arguments(
     check_float("eta_gate_fraction", eta_gate_fraction, low=0.0, low_open=True)
     check_choice("lookahead_fixed_goal", lookahead_fixed_goal, (False, True))
     check_choice("lookahead_target", lookahead_target, LOOKAHEAD_TARGETS)
+    check_float("model_td_weight", model_td_weight, low=0.0)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
     check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
     check_choice("prediction_type", prediction_type, PREDICTION_TYPES)
@@ -325,6 +327,14 @@ class POLA(OfflineAlgorithm):
         (MVE; :func:`~sb3_pola.pola.losses.value_expansion_objective`), each an estimate of ``Q(s_t, a_t)``: the
         critic never trains at a model state, so its Q there is extrapolation, and the expansion discounts it by
         ``gamma^h`` behind rewards the model was fitted on. ``lookahead_normalization`` sums or averages the expansions
+    :param model_td_weight: weight of a second TD loss in the critic's, on the transitions of ``T``-step model rollouts
+        of the EMA actor from the batch's next states (as MBPO and MOPO train their critics on model data): the
+        look-ahead judges the actor by Q at model-predicted states of its own actions, where a critic trained only
+        on the data extrapolates, and an actor trained there learns to exploit it (on hopper/medium the T = 3 policy's
+        Q overstates its own return by 60-100% after 100,000 steps, T = 0's by 1-2%; docs/results.md, eleventh pass).
+        With it the critic also fits ``r + gamma (1 - done) min_j Q'_j(s', a')`` there, with the model's reward and
+        termination. The loss is the mean over the rollouts' rows that have not ended. ``0``: off (the paper;
+        default). No effect at ``T = 0``
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False`` (default):
         look-ahead states are detached, so each Q term only trains the action taken at its state: the actor
@@ -399,6 +409,7 @@ class POLA(OfflineAlgorithm):
         eta_gate_fraction: float = 0.1,
         lookahead_fixed_goal: bool = True,
         lookahead_target: str = "q",
+        model_td_weight: float = 0.0,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -443,6 +454,7 @@ class POLA(OfflineAlgorithm):
             eta_gate_fraction=eta_gate_fraction,
             lookahead_fixed_goal=lookahead_fixed_goal,
             lookahead_target=lookahead_target,
+            model_td_weight=model_td_weight,
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             prediction_type=prediction_type,
@@ -501,6 +513,7 @@ class POLA(OfflineAlgorithm):
         self.data_value_floor = 0.0
         self.lookahead_fixed_goal = lookahead_fixed_goal
         self.lookahead_target = lookahead_target
+        self.model_td_weight = model_td_weight
         # [obs_dim] bool, the desired_goal's columns of goal-conditioned data (lookahead_fixed_goal), set by learn
         self._goal_mask: th.Tensor | None = None
         self.backprop_through_model = backprop_through_model
@@ -823,11 +836,45 @@ class POLA(OfflineAlgorithm):
         critic_loss = (current_q - target_q).pow(2).mean(dim=1).sum()
         q = current_q.detach()
         stats = {"q_mean": q.mean(), "q_ensemble_std": q.std(dim=0).mean(), "target_q": target_q.mean()}
+        if self.model_td_weight > 0 and self.rollout_length > 0:
+            model_loss, model_stats = self._model_td_loss(next_obs, next_actions, dones)
+            critic_loss = critic_loss + self.model_td_weight * model_loss
+            stats.update(model_stats)
         if input_grads is not None:
             similarity = ensemble_similarity(input_grads)
             critic_loss = critic_loss + self.critic_diversity * similarity
             stats["critic_similarity"] = similarity.detach()
         return critic_loss, {"critic_loss": critic_loss.detach(), **stats}
+
+    def _model_td_loss(
+        self, start: th.Tensor, start_actions: th.Tensor, dones: th.Tensor
+    ) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """TD loss at the transitions of ``T``-step model rollouts of the EMA actor (``model_td_weight``).
+
+        ``start``: the batch's next states, ``start_actions`` the EMA actor's actions there (the data's TD target drew
+        them), ``dones``: whether they are terminal (no rollout from those).
+        """
+        states, actions, rewards, not_done, alive = [], [], [], [], [1.0 - dones]  # per step: [B, obs], [B, A], [B]...
+        with th.no_grad():
+            state, action = start, start_actions
+            for _ in range(self.rollout_length):
+                next_state, reward, terminal, _ = self._model_step(state, action)
+                states.append(state)
+                actions.append(action)
+                rewards.append(reward)
+                not_done.append(1.0 - terminal)
+                alive.append(alive[-1] * not_done[-1])
+                state, action = next_state, self._sample_target(self.policy.actor_features(next_state))
+            # the targets' next states are the rollout's states 1..T, their actions the EMA actor's there
+            next_q = self.critic_target(th.cat(states[1:] + [state]), th.cat(actions[1:] + [action]))  # [N, T B]
+            next_q = next_q.min(dim=0).values
+            if self.target_q_floor_value is not None:
+                next_q = next_q.clamp_min(self.target_q_floor_value)
+            target_q = th.cat(rewards) + self.gamma * th.cat(not_done) * next_q  # [T B]
+            weights = th.cat(alive[:-1])  # [T B] the row's state is reached
+        current_q = self.critic(th.cat(states), th.cat(actions))  # [N, T B]
+        loss = ((current_q - target_q).pow(2) * weights).sum(dim=1).sum() / weights.sum().clamp_min(1.0)
+        return loss, {"model_q_mean": (current_q.detach().mean(dim=0) * weights).sum() / weights.sum().clamp_min(1.0)}
 
     @property
     def _behaviour_cloning(self) -> bool:
@@ -853,6 +900,22 @@ class POLA(OfflineAlgorithm):
             **stats,
         }
 
+    def _model_step(self, state: th.Tensor, action: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]:
+        """One step of the dynamics model as the look-ahead takes it: ``s'``, the reward in the critic's units, whether
+        ``s'`` ends the rollout (the env's rule, else the model's termination head; a too uncertain prediction ends it
+        too, ``lookahead_uncertainty_cutoff``) and the elites' disagreement, all ``[B]`` but ``s'``."""
+        assert self.policy.dynamics is not None
+        next_state, reward, terminal_prob, disagreement = self.policy.dynamics.step(state, action)
+        if self._goal_mask is not None:  # the task does not change in imagination (lookahead_fixed_goal)
+            next_state = th.where(self._goal_mask, state, next_state)
+        if self._termination_fn is not None:
+            terminal = self._termination_fn(state, action, next_state).float()
+        else:
+            terminal = terminal_prob.detach()
+        if self.lookahead_uncertainty_cutoff is not None:  # too uncertain a prediction ends the look-ahead
+            terminal = th.maximum(terminal, (disagreement.detach() > self.lookahead_uncertainty_cutoff).float())
+        return next_state, reward * self.reward_scale, terminal, disagreement
+
     def _lookahead_q_loss(self, obs: th.Tensor, features: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """``L_q`` of eq. 4: top-K pessimistic Q at ``s_t`` and at ``T`` model-predicted states, weighted by ``gamma^i``."""
         policy, horizon = self.policy, self.rollout_length
@@ -864,17 +927,8 @@ class POLA(OfflineAlgorithm):
         rewards: list[th.Tensor] = []  # [B] per look-ahead step, the model's r(s_{t+i}, a_{t+i})
         state = obs
         for _ in range(horizon):
-            assert policy.dynamics is not None
-            next_state, reward, terminal_prob, disagreement = policy.dynamics.step(state, action)
-            rewards.append(reward * self.reward_scale)
-            if self._goal_mask is not None:  # the task does not change in imagination (lookahead_fixed_goal)
-                next_state = th.where(self._goal_mask, state, next_state)
-            if self._termination_fn is not None:
-                terminal = self._termination_fn(state, action, next_state).float()
-            else:
-                terminal = terminal_prob.detach()
-            if self.lookahead_uncertainty_cutoff is not None:  # too uncertain a prediction ends the look-ahead
-                terminal = th.maximum(terminal, (disagreement.detach() > self.lookahead_uncertainty_cutoff).float())
+            next_state, reward, terminal, disagreement = self._model_step(state, action)
+            rewards.append(reward)
             # the penalty of the step into s_{t+i} counts while s_{t+i-1} is alive
             disagreements.append(alive[-1] * disagreement)
             alive.append(alive[-1] * (1.0 - terminal))
