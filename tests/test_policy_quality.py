@@ -248,13 +248,15 @@ def test_model_td_loss_fits_the_rollouts_bellman_target():
     # the data's critic loss gains it, times the weight
     batch = model._setup_offline_data().sample(16)
     th.manual_seed(1)
-    with_term, stats = model._critic_loss(batch.observations, batch.actions, batch.next_observations,
-                                          batch.rewards.flatten(), batch.dones.flatten())
+    with_term, stats = model._critic_loss(
+        batch.observations, batch.actions, batch.next_observations, batch.rewards.flatten(), batch.dones.flatten()
+    )
     assert "model_q_mean" in stats
     model.model_td_weight = 0.0
     th.manual_seed(1)
-    without, stats = model._critic_loss(batch.observations, batch.actions, batch.next_observations,
-                                        batch.rewards.flatten(), batch.dones.flatten())
+    without, stats = model._critic_loss(
+        batch.observations, batch.actions, batch.next_observations, batch.rewards.flatten(), batch.dones.flatten()
+    )
     assert "model_q_mean" not in stats and with_term.item() > without.item()
 
 

@@ -111,7 +111,8 @@ def summarise(name: str, figures: dict[str, np.ndarray], g: np.ndarray, ok: np.n
     cols = [f"{np.nanmean(g[ok]):.1f}", f"{np.nanmean(figures['Q'][ok]):.1f}", f"{np.nanmean(figures['Q'][ok] - g[ok]):+.1f}"]
     cols.append(f"{np.nanmean(figures['std'][ok]):.2f}")
     for key in ("err1", "err3", "u1"):  # medians: a few states where the model diverges dominate a mean
-        cols.append(f"{np.nanmedian(figures[key][ok]):.3g} / {np.nanpercentile(figures[key][ok], 95):.3g}" if key in figures else "-")
+        values = figures.get(key)
+        cols.append(f"{np.nanmedian(values[ok]):.3g} / {np.nanpercentile(values[ok], 95):.3g}" if values is not None else "-")
     cols.append(f"{np.nanmean(figures['Qs3 - Q3'][ok]):+.1f}" if "Qs3 - Q3" in figures else "-")
     return f"| {name} | " + " | ".join(cols) + " |"
 

@@ -331,7 +331,7 @@ class POLA(OfflineAlgorithm):
         of the EMA actor from the batch's next states (as MBPO and MOPO train their critics on model data): the
         look-ahead judges the actor by Q at model-predicted states of its own actions, where a critic trained only
         on the data extrapolates, and an actor trained there learns to exploit it (on hopper/medium the T = 3 policy's
-        Q overstates its own return by 60-100% after 100,000 steps, T = 0's by 1-2%; docs/results.md, eleventh pass).
+        Q overstates its own return by 50-100% after 100,000 steps, T = 0's by 1-2%; docs/results.md, eleventh pass).
         With it the critic also fits ``r + gamma (1 - done) min_j Q'_j(s', a')`` there, with the model's reward and
         termination. The loss is the mean over the rollouts' rows that have not ended. ``0``: off (the paper;
         default). No effect at ``T = 0``
@@ -866,7 +866,7 @@ class POLA(OfflineAlgorithm):
                 alive.append(alive[-1] * not_done[-1])
                 state, action = next_state, self._sample_target(self.policy.actor_features(next_state))
             # the targets' next states are the rollout's states 1..T, their actions the EMA actor's there
-            next_q = self.critic_target(th.cat(states[1:] + [state]), th.cat(actions[1:] + [action]))  # [N, T B]
+            next_q = self.critic_target(th.cat([*states[1:], state]), th.cat([*actions[1:], action]))  # [N, T B]
             next_q = next_q.min(dim=0).values
             if self.target_q_floor_value is not None:
                 next_q = next_q.clamp_min(self.target_q_floor_value)
