@@ -216,7 +216,7 @@ def _stub_model(model, reward: float, terminal_at: int | None = None) -> None:
     model.policy.dynamics.step = step  # type: ignore[method-assign,union-attr]
 
 
-def test_model_td_loss_fits_the_rollouts_bellman_target():
+def test_model_rollout_loss_fits_the_rollouts_bellman_target():
     """``model_td_weight``: the critic's loss gains the TD loss of ``T``-step model rollouts of the EMA actor from
     the batch's next states: ``r + gamma (1 - done) min_j Q'_j(s', a')`` at each step, rows after an end left out,
     and no rows from a terminal next state."""
@@ -229,22 +229,32 @@ def test_model_td_loss_fits_the_rollouts_bellman_target():
     dones = th.zeros(16)
     dones[:4] = 1.0
     model.critic_target.q_values = lambda x: th.full((model.n_critics, x.shape[-2]), 3.0)  # type: ignore[method-assign]
-    loss, stats = model._model_td_loss(next_obs, next_actions, dones)
+    data_q = th.zeros(model.n_critics, 16)  # Q at the data's (s, a): only COMBO's term reads it
+    loss, stats = model._model_rollout_loss(next_obs, next_actions, dones, data_q)
     # T = 2 rows per state: step 0 from (s, a) ends (target 2 * 0.25, no bootstrap); step 1 is never reached
     with th.no_grad():
         q = model.critic(next_obs[4:], next_actions[4:])  # [N, 12]
-    want = (q - 0.5).pow(2).mean(dim=1).sum()
+    want = 0.5 * (q - 0.5).pow(2).mean(dim=1).sum()
     assert loss.item() == pytest.approx(want.item(), rel=1e-5)
     assert stats["model_q_mean"].item() == pytest.approx(q.mean().item(), rel=1e-5)
     _stub_model(model, reward=0.25, terminal_at=None)  # no ends: every row bootstraps gamma * 3
     th.manual_seed(0)
-    loss, _ = model._model_td_loss(next_obs, next_actions, th.zeros(16))
+    loss, _ = model._model_rollout_loss(next_obs, next_actions, th.zeros(16), data_q)
     th.manual_seed(0)  # the second step's actions: the EMA actor's at s + 1, the first draw of the rollout
     with th.no_grad():
         second = model._sample_target(model.policy.actor_features(next_obs + 1.0))
         q = model.critic(th.cat([next_obs, next_obs + 1.0]), th.cat([next_actions, second]))  # [N, 32]
-    want = (q - (0.5 + model.gamma * 3.0)).pow(2).mean(dim=1).sum()
+    want = 0.5 * (q - (0.5 + model.gamma * 3.0)).pow(2).mean(dim=1).sum()
     assert loss.item() == pytest.approx(want.item(), rel=1e-5)
+    # COMBO's term: beta times, per member, the mean Q over the rollouts' rows minus the mean Q at the data
+    model.model_td_weight, model.model_conservatism = 0.0, 2.0
+    data_q = th.randn(model.n_critics, 16)
+    th.manual_seed(0)
+    loss, stats = model._model_rollout_loss(next_obs, next_actions, th.zeros(16), data_q)
+    want = 2.0 * (q.mean(dim=1) - data_q.mean(dim=1)).sum()
+    assert loss.item() == pytest.approx(want.item(), rel=1e-5)
+    assert stats["model_q_gap"].item() == pytest.approx((q.mean(dim=1) - data_q.mean(dim=1)).mean().item(), rel=1e-5)
+    model.model_td_weight, model.model_conservatism = 0.5, 0.0
     # the data's critic loss gains it, times the weight
     batch = model._setup_offline_data().sample(16)
     th.manual_seed(1)
@@ -260,20 +270,24 @@ def test_model_td_loss_fits_the_rollouts_bellman_target():
     assert "model_q_mean" not in stats and with_term.item() > without.item()
 
 
-def test_model_td_loss_moves_q_at_model_states():
+def test_model_rollout_losses_move_q_at_model_states():
     """Trained with the rollouts' TD loss, the critic's Q at the EMA actor's actions follows the model's reward (a
-    terminal reward of 40, far above the data's value); trained on the data alone it does not."""
+    terminal reward of 40, far above the data's value); trained on the data alone it does not. COMBO's term lowers
+    Q at the rollouts' off-data states (``s + 1``) below its value without it."""
     data = synthetic_dataset(300, 3, 2, seed=0)
 
-    def q_after(weight: float) -> float:
-        model = model_on_dataset(data, **light(model_td_weight=weight, rollout_length=1, eta=0.0))
-        _stub_model(model, reward=40.0, terminal_at=0)
+    def q_after(weight: float, conservatism: float = 0.0, shift: float = 0.0) -> float:
+        kwargs = light(model_td_weight=weight, model_conservatism=conservatism, rollout_length=1 + (shift > 0), eta=0.0)
+        model = model_on_dataset(data, **kwargs)
+        _stub_model(model, reward=40.0, terminal_at=0 if weight else None)
         model.train(gradient_steps=300, batch_size=32)
-        obs = th.as_tensor(data.next_observations[:64])
+        obs = th.as_tensor(data.next_observations[:64]) + shift
         with th.no_grad():
             return model.critic(obs, model._sample_target(model.policy.actor_features(obs))).mean().item()
 
-    assert q_after(1.0) > q_after(0.0) + 5.0
+    td_only = q_after(1.0)
+    assert td_only > q_after(0.0) + 5.0
+    assert q_after(0.0, conservatism=1.0, shift=1.0) < q_after(0.0, shift=1.0) - 1.0
 
 
 # ---------------------------------------------------------------- the Q-to-BC gradient ratio

@@ -115,6 +115,7 @@ def check_pola_arguments(
     lookahead_fixed_goal: bool,
     lookahead_target: str,
     model_td_weight: float,
+    model_conservatism: float,
     n_diffusion_steps: int,
     beta_schedule: str,
     prediction_type: str,
@@ -169,6 +170,7 @@ def check_pola_arguments(
     check_choice("lookahead_fixed_goal", lookahead_fixed_goal, (False, True))
     check_choice("lookahead_target", lookahead_target, LOOKAHEAD_TARGETS)
     check_float("model_td_weight", model_td_weight, low=0.0)
+    check_float("model_conservatism", model_conservatism, low=0.0)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
     check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
     check_choice("prediction_type", prediction_type, PREDICTION_TYPES)
@@ -333,8 +335,13 @@ class POLA(OfflineAlgorithm):
         on the data extrapolates, and an actor trained there learns to exploit it (on hopper/medium the T = 3 policy's
         Q overstates its own return by 50-100% after 100,000 steps, T = 0's by 1-2%; docs/results.md, eleventh pass).
         With it the critic also fits ``r + gamma (1 - done) min_j Q'_j(s', a')`` there, with the model's reward and
-        termination. The loss is the mean over the rollouts' rows that have not ended. ``0``: off (the paper;
-        default). No effect at ``T = 0``
+        termination. The loss is the mean over the rollouts' rows that have not ended. It did not stop that
+        overstatement (the rollouts' targets bootstrap from the same Q three steps on); an option, not a default.
+        ``0``: off (the paper; default). No effect at ``T = 0``
+    :param model_conservatism: weight ``beta`` of COMBO's conservative term in the critic's loss (Yu et al., 2021):
+        ``beta (mean Q at the model rollouts' states and the EMA actor's actions - mean Q at the data's (s, a))`` per
+        member, the rollouts as for ``model_td_weight``: it lowers Q where the look-ahead asks the critic and the data
+        cannot answer, and raises it at the data. ``0``: off (the paper; default). No effect at ``T = 0``
     :param backprop_through_model: ``True`` (paper eq. 3): the actor's gradient flows through the
         dynamics model into earlier actions, since ``s_{t+i}`` depends on ``a_{t+i-1}``. ``False`` (default):
         look-ahead states are detached, so each Q term only trains the action taken at its state: the actor
@@ -410,6 +417,7 @@ class POLA(OfflineAlgorithm):
         lookahead_fixed_goal: bool = True,
         lookahead_target: str = "q",
         model_td_weight: float = 0.0,
+        model_conservatism: float = 0.0,
         backprop_through_model: bool = False,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -455,6 +463,7 @@ class POLA(OfflineAlgorithm):
             lookahead_fixed_goal=lookahead_fixed_goal,
             lookahead_target=lookahead_target,
             model_td_weight=model_td_weight,
+            model_conservatism=model_conservatism,
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             prediction_type=prediction_type,
@@ -514,6 +523,7 @@ class POLA(OfflineAlgorithm):
         self.lookahead_fixed_goal = lookahead_fixed_goal
         self.lookahead_target = lookahead_target
         self.model_td_weight = model_td_weight
+        self.model_conservatism = model_conservatism
         # [obs_dim] bool, the desired_goal's columns of goal-conditioned data (lookahead_fixed_goal), set by learn
         self._goal_mask: th.Tensor | None = None
         self.backprop_through_model = backprop_through_model
@@ -836,9 +846,9 @@ class POLA(OfflineAlgorithm):
         critic_loss = (current_q - target_q).pow(2).mean(dim=1).sum()
         q = current_q.detach()
         stats = {"q_mean": q.mean(), "q_ensemble_std": q.std(dim=0).mean(), "target_q": target_q.mean()}
-        if self.model_td_weight > 0 and self.rollout_length > 0:
-            model_loss, model_stats = self._model_td_loss(next_obs, next_actions, dones)
-            critic_loss = critic_loss + self.model_td_weight * model_loss
+        if (self.model_td_weight > 0 or self.model_conservatism > 0) and self.rollout_length > 0:
+            model_loss, model_stats = self._model_rollout_loss(next_obs, next_actions, dones, current_q)
+            critic_loss = critic_loss + model_loss
             stats.update(model_stats)
         if input_grads is not None:
             similarity = ensemble_similarity(input_grads)
@@ -846,10 +856,11 @@ class POLA(OfflineAlgorithm):
             stats["critic_similarity"] = similarity.detach()
         return critic_loss, {"critic_loss": critic_loss.detach(), **stats}
 
-    def _model_td_loss(
-        self, start: th.Tensor, start_actions: th.Tensor, dones: th.Tensor
+    def _model_rollout_loss(
+        self, start: th.Tensor, start_actions: th.Tensor, dones: th.Tensor, data_q: th.Tensor
     ) -> tuple[th.Tensor, dict[str, th.Tensor]]:
-        """TD loss at the transitions of ``T``-step model rollouts of the EMA actor (``model_td_weight``).
+        """The critic's terms at ``T``-step model rollouts of the EMA actor: ``model_td_weight`` times their TD loss,
+        plus ``model_conservatism`` times COMBO's gap between Q there and Q at the data (``data_q``, ``[N, B]``).
 
         ``start``: the batch's next states, ``start_actions`` the EMA actor's actions there (the data's TD target drew
         them), ``dones``: whether they are terminal (no rollout from those).
@@ -864,17 +875,26 @@ class POLA(OfflineAlgorithm):
                 rewards.append(reward)
                 not_done.append(1.0 - terminal)
                 alive.append(alive[-1] * not_done[-1])
-                state, action = next_state, self._sample_target(self.policy.actor_features(next_state))
-            # the targets' next states are the rollout's states 1..T, their actions the EMA actor's there
-            next_q = self.critic_target(th.cat([*states[1:], state]), th.cat([*actions[1:], action]))  # [N, T B]
-            next_q = next_q.min(dim=0).values
-            if self.target_q_floor_value is not None:
-                next_q = next_q.clamp_min(self.target_q_floor_value)
-            target_q = th.cat(rewards) + self.gamma * th.cat(not_done) * next_q  # [T B]
+                state = next_state
+                action = self._sample_target(self.policy.actor_features(next_state))
             weights = th.cat(alive[:-1])  # [T B] the row's state is reached
+            n_rows = weights.sum().clamp_min(1.0)
         current_q = self.critic(th.cat(states), th.cat(actions))  # [N, T B]
-        loss = ((current_q - target_q).pow(2) * weights).sum(dim=1).sum() / weights.sum().clamp_min(1.0)
-        return loss, {"model_q_mean": (current_q.detach().mean(dim=0) * weights).sum() / weights.sum().clamp_min(1.0)}
+        loss = current_q.new_zeros(())
+        stats = {"model_q_mean": (current_q.detach().mean(dim=0) * weights).sum() / n_rows}
+        if self.model_td_weight > 0:
+            with th.no_grad():  # the targets' next states are the rollout's states 1..T, with the EMA actor's actions
+                next_q = self.critic_target(th.cat([*states[1:], state]), th.cat([*actions[1:], action]))  # [N, T B]
+                next_q = next_q.min(dim=0).values
+                if self.target_q_floor_value is not None:
+                    next_q = next_q.clamp_min(self.target_q_floor_value)
+                target_q = th.cat(rewards) + self.gamma * th.cat(not_done) * next_q  # [T B]
+            loss = loss + self.model_td_weight * ((current_q - target_q).pow(2) * weights).sum(dim=1).sum() / n_rows
+        if self.model_conservatism > 0:
+            gap = (current_q * weights).sum(dim=1) / n_rows - data_q.mean(dim=1)  # [N]
+            loss = loss + self.model_conservatism * gap.sum()
+            stats["model_q_gap"] = gap.detach().mean()
+        return loss, stats
 
     @property
     def _behaviour_cloning(self) -> bool:
