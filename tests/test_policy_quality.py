@@ -202,6 +202,30 @@ def test_value_expansion_reads_the_models_reward(target: str):
         model_on_dataset(synthetic_dataset(100, 3, 2), **light(lookahead_target="mve"))
 
 
+# ---------------------------------------------------------------- the look-ahead's weight at the predicted states
+@pytest.mark.parametrize("normalization", ["first", "weights"])
+def test_lookahead_weight_scales_the_predicted_states_terms(normalization: str):
+    """``lookahead_weight`` (lambda): eq. 3's weights become ``1, lambda gamma, lambda gamma^2, ...`` before the
+    normalisation; the default 1 is the paper's ``gamma^i``."""
+    data = synthetic_dataset(200, 3, 2, seed=0)
+    kwargs = light(lookahead_normalization=normalization)
+    assert model_on_dataset(data, **kwargs).lookahead_weight == 1.0
+    model = model_on_dataset(data, **kwargs, lookahead_weight=0.25)
+    model._shift_critic_output(100.0)  # Q > 0, so the divisor mean |Q_0| is the first term's mean
+    g = model.gamma
+    assert th.allclose(model._lookahead_powers, th.tensor([1.0, 0.25 * g, 0.25 * g * g]))
+    obs = th.as_tensor(data.observations[:32])
+    th.manual_seed(0)
+    loss, stats = model._lookahead_q_loss(obs, model.policy.actor_features(obs))
+    per_step = th.stack([stats[f"lookahead_q_{i}"] for i in range(3)])
+    weights = th.tensor([1.0, 0.25 * g, 0.25 * g * g])
+    if normalization == "weights":
+        weights = weights / weights.sum()
+    assert loss.item() == pytest.approx((-(weights * per_step).sum() / per_step[0]).item(), rel=1e-5)
+    with pytest.raises(ValueError, match="lookahead_weight"):
+        model_on_dataset(data, **light(lookahead_weight=0.5, lookahead_target="value_expansion"))
+
+
 # ---------------------------------------------------------------- the critic's TD loss at model rollouts
 def _stub_model(model, reward: float, terminal_at: int | None = None) -> None:
     """The dynamics model replaced by ``s' = s + 1``, reward ``reward``, termination on step ``terminal_at``."""

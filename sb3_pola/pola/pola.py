@@ -99,6 +99,7 @@ def check_pola_arguments(
     eta: float | Schedule,
     gamma: float,
     lookahead_normalization: str,
+    lookahead_weight: float,
     q_scale_floor: float | str | None,
     target_q_floor: float | str | None,
     reward_scale: float,
@@ -169,6 +170,9 @@ def check_pola_arguments(
     check_float("eta_gate_fraction", eta_gate_fraction, low=0.0, low_open=True)
     check_choice("lookahead_fixed_goal", lookahead_fixed_goal, (False, True))
     check_choice("lookahead_target", lookahead_target, LOOKAHEAD_TARGETS)
+    check_float("lookahead_weight", lookahead_weight, low=0.0)
+    if lookahead_weight != 1.0 and lookahead_target != "q":
+        raise HyperparameterError(f"lookahead_weight={lookahead_weight} weighs eq. 3's terms; it needs lookahead_target='q'")
     check_float("model_td_weight", model_td_weight, low=0.0)
     check_float("model_conservatism", model_conservatism, low=0.0)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
@@ -248,6 +252,12 @@ class POLA(OfflineAlgorithm):
         Q terms are summed and divided by ``mean |Q|`` of the first, so the Q term's weight grows with
         ``T`` (``sum_i gamma^i``, 3.94 at ``T = 3``); ``"weights"``: also divided by
         ``sum_i gamma^i``, so ``eta`` weighs the Q term the same for every ``T``
+    :param lookahead_weight: factor ``lambda`` on eq. 3's terms at the predicted states, whose weights become
+        ``lambda gamma^i`` for ``i >= 1`` (before ``lookahead_normalization``): the current state keeps its weight while the
+        predicted states, where the critic never trained, pull less. On hopper/medium the look-ahead's Q weight at the
+        predicted states, not the current state's, is what the actor learns to exploit after 30,000 steps
+        (docs/results.md, eleventh pass). ``1``: the paper (default); ``0``: the states are rolled out but pull nothing.
+        Only with ``lookahead_target="q"``
     :param q_scale_floor: lower bound of the detached ``mean |Q|`` that divides the Q term. ``None``:
         Diffusion-QL's batch mean alone (the paper; default). ``"auto"``: the dataset's value scale
         ``mean |r| / (1 - gamma)``,
@@ -401,6 +411,7 @@ class POLA(OfflineAlgorithm):
         rollout_length: int = 3,
         eta: float | Schedule = 1.0,
         lookahead_normalization: str = "first",
+        lookahead_weight: float = 1.0,
         q_scale_floor: float | str | None = None,
         target_q_floor: float | str | None = "returns",
         reward_scale: float = 1.0,
@@ -447,6 +458,7 @@ class POLA(OfflineAlgorithm):
             eta=eta,
             gamma=gamma,
             lookahead_normalization=lookahead_normalization,
+            lookahead_weight=lookahead_weight,
             q_scale_floor=q_scale_floor,
             target_q_floor=target_q_floor,
             reward_scale=reward_scale,
@@ -497,6 +509,7 @@ class POLA(OfflineAlgorithm):
         self.rollout_length = rollout_length
         self.eta = eta
         self.lookahead_normalization = lookahead_normalization
+        self.lookahead_weight = lookahead_weight
         self.q_scale_floor = q_scale_floor
         # the floor's value: q_scale_floor, or the dataset's value scale once the data are loaded ("auto")
         self.q_scale_floor_value: float | None = None if q_scale_floor == "auto" else float(q_scale_floor or 0.0)
@@ -575,6 +588,10 @@ class POLA(OfflineAlgorithm):
             self.policy.set_normalization(mean, std)
         self._create_aliases()
         self._gamma_powers = th.tensor([self.gamma**i for i in range(self.rollout_length + 1)], device=self.device)
+        # eq. 3's weights: gamma^i, times lookahead_weight at the predicted states
+        self._lookahead_powers = self._gamma_powers * th.tensor(
+            [1.0] + [float(self.lookahead_weight)] * self.rollout_length, device=self.device
+        )
         self._eta_value = th.zeros((), device=self.device)  # this step's eta, a tensor so a compiled graph reads it
         # eq. 5's chain in its fast forms (sb3_pola.pola.fast_sampling, tested equal to DiffusionActor.sample): the
         # actor's samples need gradients; the target's do not, but a compiled graph traces the differentiable
@@ -615,6 +632,7 @@ class POLA(OfflineAlgorithm):
             "critic_target",
             "_termination_fn",
             "_gamma_powers",
+            "_lookahead_powers",
             "_eta_value",
             "_sample_actor",
             "_sample_target",
@@ -961,12 +979,14 @@ class POLA(OfflineAlgorithm):
         q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
         alive_mask = th.stack(alive)  # [T+1, B]
         objective: Callable[..., tuple[th.Tensor, th.Tensor]] = lookahead_q_objective  # eq. 3/4
+        powers = self._lookahead_powers
         if self.lookahead_target == "value_expansion" and horizon > 0:
             objective = functools.partial(value_expansion_objective, rewards=th.stack(rewards))  # [T, B]
+            powers = self._gamma_powers
         q_loss, per_step = objective(
             q.view(-1, horizon + 1, batch_size),  # [N, T+1, B]
             alive=alive_mask,
-            gamma_powers=self._gamma_powers,
+            gamma_powers=powers,
             top_k=self.top_k,
             normalization=self.lookahead_normalization,
             q_scale_floor=self.q_scale_floor_value or 0.0,
@@ -981,7 +1001,7 @@ class POLA(OfflineAlgorithm):
         if horizon > 0:
             doubt = th.stack(disagreements).mean(dim=1)  # [T]
             if self.lookahead_uncertainty_penalty > 0:
-                weights = lookahead_weights(self._gamma_powers, self.lookahead_normalization)[1:]
+                weights = lookahead_weights(powers, self.lookahead_normalization)[1:]
                 q_loss = q_loss + self.lookahead_uncertainty_penalty * (weights * doubt).sum()
             stats.update({f"lookahead_uncertainty_{i + 1}": doubt[i].detach() for i in range(horizon)})
         return q_loss, stats
