@@ -52,7 +52,7 @@ def _actor_grad_from_step(model: POLA, step: int, obs: th.Tensor) -> tuple[float
     """Actor gradient norm (and d loss / d obs) of the Q term of look-ahead step ``step`` alone."""
     weights = th.zeros(model.rollout_length + 1)
     weights[step] = 1.0
-    model._gamma_powers = weights
+    model._lookahead_powers = weights  # eq. 3's weights (gamma^i times lookahead_weight)
     model.actor.zero_grad(set_to_none=True)
     obs = obs.clone().requires_grad_(True)
     with model._critic_frozen():
