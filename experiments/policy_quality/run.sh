@@ -349,7 +349,7 @@ done
 # '{"model_td_weight": 1.0}', '{"model_conservatism": 1.0}' and '{"eta": 3.94, "lookahead_weight": 0.0625}' with
 # experiments/long100k/run.sh, each its own OUT). 10k screens, seed 0: the critic's TD loss at the look-ahead's model
 # rollouts (MTD1), "weights" at eta 1 (T3W1), and the current state at T = 0's eta 3.94 with the predicted states at
-# 1/16 of it (LA16).
+# 1/16 of it (LA16, seeds 0-2).
 for d in hopper/medium-v0 halfcheetah/medium-v0; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name MTD1 --rules noisefree,obsnoise \
     --kwargs '{"model_td_weight": 1.0}'
@@ -358,7 +358,9 @@ for d in hopper/medium-v0 halfcheetah/medium-v0 hopper/medium-replay-v0 pointmaz
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name T3W1 --rules noisefree,obsnoise \
     --kwargs '{"lookahead_normalization": "weights"}'
 done
-for d in halfcheetah/medium-v0 hopper/medium-replay-v0 pointmaze/umaze-v0 halfcheetah/medium-replay-v0 pointmaze/medium-v0 hopper/medium-v0; do
-  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed 0 --name LA16 --rules noisefree,obsnoise \
-    --kwargs '{"eta": 3.94, "lookahead_weight": 0.0625}'
+for s in 0 1 2; do
+  for d in halfcheetah/medium-v0 hopper/medium-replay-v0 pointmaze/umaze-v0 halfcheetah/medium-replay-v0 pointmaze/medium-v0 hopper/medium-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name LA16 --rules noisefree,obsnoise \
+      --kwargs '{"eta": 3.94, "lookahead_weight": 0.0625}'
+  done
 done
