@@ -27,6 +27,7 @@ import torch as th
 
 from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset, make_env
+from sb3_pola.pola.losses import pessimistic_q
 
 HORIZON = 3
 
@@ -65,9 +66,9 @@ def act(model: POLA, obs: np.ndarray) -> np.ndarray:
     return model.policy.scale_action(model.predict(obs, deterministic=True)[0]).astype(np.float32)
 
 
-def pessimistic_q(model: POLA, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
-    """Mean of the ``top_k`` smallest members' Q (eq. 4's policy loss)."""
-    return model.critic(obs, actions).sort(dim=0).values[: model.top_k].mean(dim=0)
+def top_k_q(model: POLA, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+    """Eq. 4's pessimistic Q, as the policy loss reads it."""
+    return pessimistic_q(model.critic(obs, actions), model.top_k, model.lcb_coef)
 
 
 @th.no_grad()
@@ -77,7 +78,7 @@ def measure(model: POLA, obs: np.ndarray, actions: list[np.ndarray], nxt: list[n
     dyn = model.policy.dynamics
     s, a = th.as_tensor(obs), th.as_tensor(actions[0])
     q = model.critic(s, a)  # [N, B]
-    out = {"Q": pessimistic_q(model, s, a).numpy(), "std": q.std(dim=0).numpy()}
+    out = {"Q": pessimistic_q(q, model.top_k, model.lcb_coef).numpy(), "std": q.std(dim=0).numpy()}
     if dyn is None:
         return out
     # the model's error on the actions actually taken, open loop
@@ -94,8 +95,8 @@ def measure(model: POLA, obs: np.ndarray, actions: list[np.ndarray], nxt: list[n
     for _ in range(HORIZON):
         state = dyn.step(state, th.as_tensor(act(model, state.numpy())))[0]
     real3 = np.nan_to_num(nxt[HORIZON - 1])
-    q_model = pessimistic_q(model, state, th.as_tensor(act(model, state.numpy())))
-    q_real = pessimistic_q(model, th.as_tensor(real3), th.as_tensor(act(model, real3)))
+    q_model = top_k_q(model, state, th.as_tensor(act(model, state.numpy())))
+    q_real = top_k_q(model, th.as_tensor(real3), th.as_tensor(act(model, real3)))
     gap = (q_model - q_real).numpy()
     gap[np.isnan(nxt[HORIZON - 1]).any(axis=1)] = np.nan
     out["Qs3 - Q3"] = gap

@@ -8,7 +8,7 @@ import torch as th
 def lookahead_weights(gamma_powers: th.Tensor, normalization: str) -> th.Tensor:
     """``[T+1]`` weights of the look-ahead terms: ``gamma^i`` (eq. 3), or divided by their sum (``"weights"``).
 
-    ``gamma_powers`` may carry ``lookahead_weight``'s factor on the terms ``i >= 1`` (``POLA._gamma_powers``)."""
+    ``gamma_powers`` may carry ``lookahead_weight``'s factor on the terms ``i >= 1`` (``POLA._lookahead_powers``)."""
     return gamma_powers / gamma_powers.sum() if normalization == "weights" else gamma_powers
 
 
