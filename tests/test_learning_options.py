@@ -183,8 +183,8 @@ def test_uncertainty_cutoff_and_penalty(pendulum_path):
     model.lookahead_uncertainty_penalty = 2.0
     th.manual_seed(0)
     penalised_loss, _ = model._lookahead_q_loss(obs, feats)
-    g = model.gamma
-    expected = plain_loss + 2.0 * (g * plain["lookahead_uncertainty_1"] + g**2 * plain["lookahead_uncertainty_2"])
+    g, lam = model.gamma, model.lookahead_weight  # the penalty weighs each state as eq. 3 does
+    expected = plain_loss + 2.0 * lam * (g * plain["lookahead_uncertainty_1"] + g**2 * plain["lookahead_uncertainty_2"])
     assert penalised_loss.item() == pytest.approx(expected.item(), rel=1e-5)
 
 
@@ -292,6 +292,8 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
     default = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs())
     paper = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(**PAPER_FORM))
     assert PAPER_FORM == {
+        "eta": 1.0,
+        "lookahead_weight": 1.0,
         "lookahead_normalization": "first",
         "q_scale_floor": None,
         "critic_diversity": 0.0,
@@ -312,6 +314,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
     assert default.critic_layer_norm and default.policy.critic_layer_norm and not paper.policy.critic_layer_norm
     assert any(isinstance(m, th.nn.LayerNorm) for m in default.critic.q_net)
     assert not any(isinstance(m, th.nn.LayerNorm) for m in paper.critic.q_net)
+    assert (default.eta, default.lookahead_weight) == (3.94, 0.0625)  # #23's twelfth pass
     assert (default.critic_diversity, default.backprop_through_model) == (1.0, False)
     assert (default.eta_gate, default.eta_gate_fraction) == ("critic_maturity", 0.1)
     assert (default.target_q_floor, default.critic_init_value) == ("returns", "returns")

@@ -13,7 +13,7 @@ from sb3_pola.common.diffusion import NoiseSchedule
 from sb3_pola.common.torch_layers import vectorized_mlp
 from sb3_pola.pola import pola as pola_module
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
-from sb3_pola.pola.losses import value_expansion_objective, value_lower_bound
+from sb3_pola.pola.losses import lookahead_weights, pessimistic_q, value_expansion_objective, value_lower_bound
 from sb3_pola.pola.pola import PAPER_FORM, lookahead_q_objective
 from sb3_pola.pola.policies import DiffusionActor
 
@@ -206,10 +206,11 @@ def test_value_expansion_reads_the_models_reward(target: str):
 @pytest.mark.parametrize("normalization", ["first", "weights"])
 def test_lookahead_weight_scales_the_predicted_states_terms(normalization: str):
     """``lookahead_weight`` (lambda): eq. 3's weights become ``1, lambda gamma, lambda gamma^2, ...`` before the
-    normalisation; the default 1 is the paper's ``gamma^i``."""
+    normalisation; 1 is the paper's ``gamma^i``."""
     data = synthetic_dataset(200, 3, 2, seed=0)
     kwargs = light(lookahead_normalization=normalization)
-    assert model_on_dataset(data, **kwargs).lookahead_weight == 1.0
+    paper = model_on_dataset(data, **kwargs, lookahead_weight=1.0)
+    assert th.allclose(paper._lookahead_powers, paper._gamma_powers)
     model = model_on_dataset(data, **kwargs, lookahead_weight=0.25)
     model._shift_critic_output(100.0)  # Q > 0, so the divisor mean |Q_0| is the first term's mean
     g = model.gamma
@@ -222,8 +223,45 @@ def test_lookahead_weight_scales_the_predicted_states_terms(normalization: str):
     if normalization == "weights":
         weights = weights / weights.sum()
     assert loss.item() == pytest.approx((-(weights * per_step).sum() / per_step[0]).item(), rel=1e-5)
-    with pytest.raises(ValueError, match="lookahead_weight"):
-        model_on_dataset(data, **light(lookahead_weight=0.5, lookahead_target="value_expansion"))
+
+
+def test_default_lookahead_weighs_the_current_state_and_a_sixteenth_at_the_predicted_states():
+    """#23, twelfth pass: the default Q weight is ``eta = 3.94`` on the current state (what the paper's ``eta = 1``
+    gives all ``T + 1`` states at ``T = 3``) and ``3.94 gamma^i / 16`` at each predicted state; the paper's weights,
+    ``gamma^i`` at ``eta = 1``, are ``**PAPER_FORM``'s."""
+    data = synthetic_dataset(200, 3, 2, seed=0)
+    default = model_on_dataset(data, **light(rollout_length=3))
+    g = default.gamma
+    assert (float(default.eta), default.lookahead_weight, default.lookahead_normalization) == (3.94, 0.0625, "first")
+    actor_weights = float(default.eta) * lookahead_weights(default._lookahead_powers, default.lookahead_normalization)
+    assert th.allclose(actor_weights, th.tensor([3.94] + [3.94 * g**i / 16 for i in (1, 2, 3)]))
+    assert actor_weights[0] > 15 * actor_weights[1:].max()
+    paper = model_on_dataset(data, **light(rollout_length=3, **PAPER_FORM))
+    paper_weights = float(paper.eta) * lookahead_weights(paper._lookahead_powers, paper.lookahead_normalization)
+    assert th.allclose(paper_weights, th.tensor([g**i for i in range(4)]))
+    assert paper_weights.sum().item() == pytest.approx(3.94, abs=1e-3)  # the default's current-state weight
+
+
+@pytest.mark.parametrize("normalization", ["first", "weights"])
+def test_lookahead_weight_weighs_the_value_expansions(normalization: str):
+    """With ``lookahead_target="value_expansion"``, ``lookahead_weight`` weighs each ``V_h``, ``h >= 1``, against
+    ``V_0``; at 1 the expansions are summed or averaged as before."""
+    q = th.randn(4, 4, 8) + 10.0  # [N, T+1, B]
+    rewards, alive, powers = th.rand(3, 8), th.ones(4, 8), th.tensor([0.99**i for i in range(4)])
+    loss_1, per_step = value_expansion_objective(q, rewards, alive, powers, 2, normalization)
+    loss_w, per_step_w = value_expansion_objective(q, rewards, alive, powers, 2, normalization, expansion_weight=0.25)
+    assert th.equal(per_step, per_step_w)
+    scale = pessimistic_q(q, 2)[0].abs().mean()
+    weights = th.tensor([1.0, 0.25, 0.25, 0.25])
+    if normalization == "weights":
+        weights, plain = weights / weights.sum(), per_step.mean()
+    else:
+        plain = per_step.sum()
+    assert loss_1.item() == pytest.approx((-plain / scale).item(), rel=1e-5)
+    assert loss_w.item() == pytest.approx((-(weights * per_step).sum() / scale).item(), rel=1e-5)
+    data = synthetic_dataset(200, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(lookahead_target="value_expansion", lookahead_weight=0.5))
+    assert model.lookahead_weight == 0.5  # accepted: the default 1/16 must not refuse value expansion
 
 
 # ---------------------------------------------------------------- the critic's TD loss at model rollouts

@@ -139,7 +139,8 @@ def reference_step(model, policy, batch) -> dict[str, object]:
         state = next_state if model.backprop_through_model else next_state.detach()
         action = ref_sample(actor, feats(state))
     scale = terms[0][0].abs().mean().detach().clamp_min(max(model.q_scale_floor_value or 0.0, 1e-6))
-    weights = [model.gamma**i for i in range(model.rollout_length + 1)]
+    # eq. 3's gamma^i, times lookahead_weight at the predicted states
+    weights = [model.gamma**i * (model.lookahead_weight if i else 1.0) for i in range(model.rollout_length + 1)]
     if model.lookahead_normalization == "weights":
         weights = [w / sum(weights) for w in weights]
     q_loss = -sum(w * (a * q_k).mean() for w, (q_k, a) in zip(weights, terms, strict=True)) / scale
@@ -187,6 +188,7 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         {"prediction_type": "epsilon"},
         {"lcb_coef": 1.5},
         {"critic_layer_norm": False},  # the paper's plain critics (LayerNorm ones are the default)
+        {"lookahead_weight": 1.0, "eta": 1.0},  # the paper's eq. 3 weights (#23's twelfth pass: 1/16 and 3.94)
     ],
 )
 def test_update_matches_reference(kwargs):

@@ -202,6 +202,7 @@ def test_eta_warmup_from_json() -> None:
     assert isinstance(kwargs["eta"], WarmupSchedule) and kwargs["eta"](0.2) == 2.0 and kwargs["eta"](0.6) == 0.0
     assert kwargs["rollout_length"] == 3 and "eta_warmup" not in kwargs
     assert grid_variants.pola_kwargs({"eta_warmup": [0.5, 0.2], "eta": 0.0})["eta"] == 0.0  # BC stays BC
+    assert grid_variants.pola_kwargs({"eta_warmup": [0.5, 0.2]})["eta"](0.2) == 3.94  # the package default
 
 
 def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
@@ -214,10 +215,11 @@ def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.P
     # the paper's form changed it (cpu: cd99bea051, paper: f8a0da1694 before #12; 05ed254249, 6863b1ac8a before #23;
     # 46209b7d80, 824efa1128 before #23's LayerNorm critics; c8dd8105f2, 4c8e7685a9 before #23's maturity gate, whose
     # explicit eta_gate=None in PAPER_FORM changes the paper's too; 08455f37e6, 97f527da8d before #23's "returns" floor
-    # and critic start; 7094a5d722, c1594669b0 before #23's fixed goal in the look-ahead), so that a folder of the old
-    # defaults is not resumed under the new ones
+    # and critic start; 7094a5d722, c1594669b0 before #23's fixed goal in the look-ahead; 20c38ed775, e9625c50e1 before
+    # #23's eta 3.94 and lookahead_weight 1/16, which PAPER_FORM now names), so that a folder of the old defaults is
+    # not resumed under the new ones
     presets = grid_variants.PRESETS
-    assert presets["cpu"].signature() == "20c38ed775" and presets["paper"].signature() == "e9625c50e1"
+    assert presets["cpu"].signature() == "bd27d4080b" and presets["paper"].signature() == "9f44ccef5c"
     base, sampled = tmp_path / "ema", tmp_path / "stochastic"
     assert run(score_data, base, "--variants", "T1", "--seeds", "0") == 0
     assert run(score_data, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0

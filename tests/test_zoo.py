@@ -111,6 +111,18 @@ def test_yaml_has_every_table_one_task() -> None:
     assert "default" in config and "invertedpendulum/medium-v0" in config
 
 
+def test_yaml_paper_entries_are_the_papers_form_and_light_ones_the_package_defaults() -> None:
+    """Table I's entries run the paper's form (``PAPER_FORM``, #23: also its ``eta = 1`` and eq. 3's weights); the
+    light CPU entries leave every choice of ``PAPER_FORM`` and ``eta`` to the package defaults."""
+    from sb3_pola import PAPER_FORM
+
+    config = yaml.safe_load(CONFIG.read_text())
+    for key in ("mujoco-hopper/medium-v0", "halfcheetah/medium-replay-v1"):
+        assert {k: config[key][k] for k in PAPER_FORM} == PAPER_FORM, key
+    for key in ("default", "invertedpendulum/medium-v0"):
+        assert not set(config[key]) & (set(PAPER_FORM) | {"eta"}), key
+
+
 @pytest.mark.parametrize("env_id", yaml_entries())
 def test_yaml_entry_builds_model(env_id: str, tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Each entry goes through the zoo's own parsing and builds POLA on a tiny stand-in of its dataset."""

@@ -220,8 +220,9 @@ def pola_kwargs(extra: dict[str, Any]) -> dict[str, Any]:
     kwargs = dict(extra)
     if "eta_warmup" in kwargs:
         warmup, ramp = kwargs.pop("eta_warmup")
-        if kwargs.get("eta", 1.0) != 0:  # behaviour cloning stays behaviour cloning
-            kwargs["eta"] = WarmupSchedule(float(kwargs.get("eta", 1.0)), warmup, ramp)
+        eta = float(kwargs.get("eta", pola_defaults(["eta"])["eta"]))
+        if eta != 0:  # behaviour cloning stays behaviour cloning
+            kwargs["eta"] = WarmupSchedule(eta, warmup, ramp)
     return kwargs
 
 

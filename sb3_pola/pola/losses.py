@@ -95,6 +95,7 @@ def value_expansion_objective(
     normalization: str = "first",
     q_scale_floor: float = 0.0,
     lcb_coef: float | None = None,
+    expansion_weight: float = 1.0,
 ) -> tuple[th.Tensor, th.Tensor]:
     """``L_q`` with the look-ahead judged by the model's rewards: value expansions (MVE, Feinberg et al., 2018).
 
@@ -113,6 +114,7 @@ def value_expansion_objective(
     :param normalization: ``"first"`` (sum) or ``"weights"`` (mean) of the expansions
     :param q_scale_floor: lower bound of the divisor ``mean |Q|`` at the current states
     :param lcb_coef: lower confidence bound in place of the top-K mean (:func:`pessimistic_q`)
+    :param expansion_weight: weight of each expansion ``V_h``, ``h >= 1``, against ``V_0``'s 1 (``lookahead_weight``)
     :return: the loss and the ``[T+1]`` batch means of ``V_h``
     """
     q_top_k = pessimistic_q(q, top_k, lcb_coef)  # [T+1, B]
@@ -120,5 +122,7 @@ def value_expansion_objective(
     reward_sums = th.cat([q_top_k.new_zeros(1, q_top_k.shape[1]), discounted.cumsum(dim=0)])  # [T+1, B]: sum_{i<h}
     values = reward_sums + gamma_powers[:, None] * alive * q_top_k  # [T+1, B]: V_h
     per_step = values.mean(dim=1)  # [T+1]
-    total = per_step.sum() if normalization == "first" else per_step.mean()
+    weights = th.full_like(per_step, expansion_weight)
+    weights[0] = 1.0
+    total = (lookahead_weights(weights, normalization) * per_step).sum()  # summed ("first") or averaged
     return -total / _q_scale(q_top_k, q_scale_floor), per_step

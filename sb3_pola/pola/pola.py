@@ -61,6 +61,8 @@ GRADIENT_RATIO_FREQ = 100  # gradient steps between two measurements of train/q_
 # through the model, the DDPM noise target of eq. 6, a constant learning rate): POLA(..., **PAPER_FORM); the defaults
 # depart from it (docstring)
 PAPER_FORM: dict[str, Any] = {
+    "eta": 1.0,
+    "lookahead_weight": 1.0,
     "lookahead_normalization": "first",
     "q_scale_floor": None,
     "critic_diversity": 0.0,
@@ -171,8 +173,6 @@ def check_pola_arguments(
     check_choice("lookahead_fixed_goal", lookahead_fixed_goal, (False, True))
     check_choice("lookahead_target", lookahead_target, LOOKAHEAD_TARGETS)
     check_float("lookahead_weight", lookahead_weight, low=0.0)
-    if lookahead_weight != 1.0 and lookahead_target != "q":
-        raise HyperparameterError(f"lookahead_weight={lookahead_weight} weighs eq. 3's terms; it needs lookahead_target='q'")
     check_float("model_td_weight", model_td_weight, low=0.0)
     check_float("model_conservatism", model_conservatism, low=0.0)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
@@ -198,7 +198,8 @@ class POLA(OfflineAlgorithm):
     2. actor: ``L_d + eta * L_q`` where ``L_d`` is the DDPM loss on dataset actions (eq. 6) and
        ``L_q`` the look-ahead loss (eq. 3, 4): the mean of the ``top_k`` smallest ensemble
        Q-values at the current state and at ``rollout_length`` states predicted by the dynamics
-       model, weighted by ``gamma^i``; the actor sees ``s_new``, the state with all pairwise
+       model, weighted by ``gamma^i`` (times ``lookahead_weight`` at the predicted states); the actor sees
+       ``s_new``, the state with all pairwise
        products (section V);
     3. EMA actor and Polyak target critics.
 
@@ -213,7 +214,10 @@ class POLA(OfflineAlgorithm):
     MuJoCo rule for the env, or the model's learned termination head when the env is unknown)
     marks terminal contribute no Q term, and neither do any states after them.
 
-    Nine defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
+    Eleven defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
+    ``eta=3.94`` with ``lookahead_weight=1/16`` (the Q weight the paper gives all ``T + 1`` states at ``T = 3`` goes
+    to the current state; each predicted state, where the critic never trained, weighs a sixteenth of the paper's:
+    at the paper's weights the actor learned to exploit the critic there, and hopper/medium fell after 30,000 steps),
     ``critic_layer_norm=True`` (LayerNorm critics, as ReBRAC: they bound Q off the data, so the Q term keeps the
     paper's full strength, ``lookahead_normalization="first"`` and no floor, without the actor climbing the critic's
     extrapolation; without them that strength collapsed the locomotion actors within a CPU budget),
@@ -247,7 +251,9 @@ class POLA(OfflineAlgorithm):
     :param rollout_length: look-ahead horizon ``T`` (paper ablates 0, 1, 3, 5; 0 disables the model)
     :param eta: weight of the Q term in the actor loss (``0`` = behaviour cloning): a float, or an SB3
         ``Schedule`` of the remaining progress (1 at the start of ``learn``, 0 at the end), e.g.
-        :func:`~sb3_pola.common.schedules.warmup_schedule` for a behaviour-cloning warm-up
+        :func:`~sb3_pola.common.schedules.warmup_schedule` for a behaviour-cloning warm-up. Default 3.94
+        (``sum_{i<=3} 0.99^i``, the Q weight the paper's ``eta = 1`` gives at ``T = 3`` under ``"first"``), now on the
+        current state, the predicted states at ``lookahead_weight``; the paper: 1
     :param lookahead_normalization: ``"first"`` (the paper, eq. 3/4 as written; default): the ``T + 1`` weighted
         Q terms are summed and divided by ``mean |Q|`` of the first, so the Q term's weight grows with
         ``T`` (``sum_i gamma^i``, 3.94 at ``T = 3``); ``"weights"``: also divided by
@@ -256,8 +262,9 @@ class POLA(OfflineAlgorithm):
         ``lambda gamma^i`` for ``i >= 1`` (before ``lookahead_normalization``): the current state keeps its weight while the
         predicted states, where the critic never trained, pull less. On hopper/medium the look-ahead's Q weight at the
         predicted states, not the current state's, is what the actor learns to exploit after 30,000 steps
-        (docs/results.md, eleventh pass). ``1``: the paper (default); ``0``: the states are rolled out but pull nothing.
-        Only with ``lookahead_target="q"``
+        (docs/results.md, eleventh and twelfth passes). Default ``1/16``: with ``eta = 3.94`` each predicted state
+        weighs about 0.24 against the current state's 3.94; ``1``: the paper; ``0``: the states are rolled out but pull
+        nothing. With ``lookahead_target="value_expansion"`` it weighs each expansion ``V_h``, ``h >= 1``
     :param q_scale_floor: lower bound of the detached ``mean |Q|`` that divides the Q term. ``None``:
         Diffusion-QL's batch mean alone (the paper; default). ``"auto"``: the dataset's value scale
         ``mean |r| / (1 - gamma)``,
@@ -409,9 +416,9 @@ class POLA(OfflineAlgorithm):
         n_critics: int = 10,
         top_k: int = 2,
         rollout_length: int = 3,
-        eta: float | Schedule = 1.0,
+        eta: float | Schedule = 3.94,
         lookahead_normalization: str = "first",
-        lookahead_weight: float = 1.0,
+        lookahead_weight: float = 0.0625,
         q_scale_floor: float | str | None = None,
         target_q_floor: float | str | None = "returns",
         reward_scale: float = 1.0,
@@ -981,7 +988,9 @@ class POLA(OfflineAlgorithm):
         objective: Callable[..., tuple[th.Tensor, th.Tensor]] = lookahead_q_objective  # eq. 3/4
         powers = self._lookahead_powers
         if self.lookahead_target == "value_expansion" and horizon > 0:
-            objective = functools.partial(value_expansion_objective, rewards=th.stack(rewards))  # [T, B]
+            objective = functools.partial(  # rewards [T, B]
+                value_expansion_objective, rewards=th.stack(rewards), expansion_weight=float(self.lookahead_weight)
+            )
             powers = self._gamma_powers
         q_loss, per_step = objective(
             q.view(-1, horizon + 1, batch_size),  # [N, T+1, B]
