@@ -78,6 +78,26 @@ def test_gradient_reaches_actor_through_every_lookahead_step(pendulum_path, back
             assert reached == backprop
 
 
+@pytest.mark.parametrize("lookahead_actions", ["actor", "ema"])
+def test_ema_lookahead_actions_train_the_actor_only_through_the_model(pendulum_path, lookahead_actions):
+    """``lookahead_actions="ema"``: the EMA actor acts at the predicted states, so a predicted state's Q term reaches
+    the actor only through ``a_t`` and the model. With a model whose ``s'`` ignores the action it reaches nothing;
+    with the actor acting there (the paper) it still does."""
+    kwargs = light_kwargs(rollout_length=2, backprop_through_model=True, lookahead_actions=lookahead_actions)
+    model = POLA("MlpPolicy", dataset=pendulum_path, **kwargs)
+    model.learn(2)
+    obs = model.replay_buffer.sample(16).observations
+    model.critic.zero_grad(set_to_none=True)
+    assert _actor_grad_from_step(model, 2, obs)[0] > 0  # the real model carries it from a_t
+    zeros = th.zeros(len(obs))
+    model._termination_fn = None
+    model.policy.dynamics.step = lambda s, a: (s + 1.0, zeros, zeros, zeros)  # type: ignore[method-assign,union-attr]
+    norm, _ = _actor_grad_from_step(model, 2, obs)
+    assert (norm > 0) == (lookahead_actions == "actor")
+    with pytest.raises(ValueError, match="backprop_through_model=True"):
+        POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(lookahead_actions="ema"))
+
+
 def test_dynamics_is_fitted_frozen_and_logged(pendulum_path):
     model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(dynamics_fit_kwargs=dict(max_epochs=3)))
     assert not bool(model.policy.dynamics_fitted)

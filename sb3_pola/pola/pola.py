@@ -52,6 +52,7 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
 LOOKAHEAD_TARGETS = ("q", "value_expansion")
+LOOKAHEAD_ACTIONS = ("actor", "ema")
 ETA_GATES = (None, "critic_maturity")
 GOAL_SWITCHES = (None, "terminal", "relabel")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
@@ -117,6 +118,8 @@ def check_pola_arguments(
     eta_gate_fraction: float,
     lookahead_fixed_goal: bool,
     lookahead_target: str,
+    lookahead_actions: str,
+    backprop_through_model: bool,
     model_td_weight: float,
     model_conservatism: float,
     n_diffusion_steps: int,
@@ -173,6 +176,11 @@ def check_pola_arguments(
     check_choice("lookahead_fixed_goal", lookahead_fixed_goal, (False, True))
     check_choice("lookahead_target", lookahead_target, LOOKAHEAD_TARGETS)
     check_float("lookahead_weight", lookahead_weight, low=0.0)
+    check_choice("lookahead_actions", lookahead_actions, LOOKAHEAD_ACTIONS)
+    if lookahead_actions == "ema" and not backprop_through_model:
+        raise HyperparameterError(
+            "lookahead_actions='ema' trains the actor through the model only; it needs backprop_through_model=True"
+        )
     check_float("model_td_weight", model_td_weight, low=0.0)
     check_float("model_conservatism", model_conservatism, low=0.0)
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
@@ -346,6 +354,12 @@ class POLA(OfflineAlgorithm):
         (MVE; :func:`~sb3_pola.pola.losses.value_expansion_objective`), each an estimate of ``Q(s_t, a_t)``: the
         critic never trains at a model state, so its Q there is extrapolation, and the expansion discounts it by
         ``gamma^h`` behind rewards the model was fitted on. ``lookahead_normalization`` sums or averages the expansions
+    :param lookahead_actions: who acts at the predicted states. ``"actor"`` (the paper; default): the actor, so eq. 3's
+        terms at ``s_{t+i}`` train its action there by Q alone, at states without a dataset action for ``L_d`` to
+        anchor it (on hopper/medium the T = 3 actor learned to exploit the critic there; docs/results.md, twelfth
+        pass). ``"ema"``: the EMA actor, as a fixed function of the state, so the look-ahead trains only ``a_t``, at the
+        data's state where ``L_d`` anchors it, through where the model says it leads; needs
+        ``backprop_through_model=True``
     :param model_td_weight: weight of a second TD loss in the critic's, on the transitions of ``T``-step model rollouts
         of the EMA actor from the batch's next states (as MBPO and MOPO train their critics on model data): the
         look-ahead judges the actor by Q at model-predicted states of its own actions, where a critic trained only
@@ -434,6 +448,7 @@ class POLA(OfflineAlgorithm):
         eta_gate_fraction: float = 0.1,
         lookahead_fixed_goal: bool = True,
         lookahead_target: str = "q",
+        lookahead_actions: str = "actor",
         model_td_weight: float = 0.0,
         model_conservatism: float = 0.0,
         backprop_through_model: bool = False,
@@ -481,6 +496,8 @@ class POLA(OfflineAlgorithm):
             eta_gate_fraction=eta_gate_fraction,
             lookahead_fixed_goal=lookahead_fixed_goal,
             lookahead_target=lookahead_target,
+            lookahead_actions=lookahead_actions,
+            backprop_through_model=backprop_through_model,
             model_td_weight=model_td_weight,
             model_conservatism=model_conservatism,
             n_diffusion_steps=n_diffusion_steps,
@@ -542,6 +559,7 @@ class POLA(OfflineAlgorithm):
         self.data_value_floor = 0.0
         self.lookahead_fixed_goal = lookahead_fixed_goal
         self.lookahead_target = lookahead_target
+        self.lookahead_actions = lookahead_actions
         self.model_td_weight = model_td_weight
         self.model_conservatism = model_conservatism
         # [obs_dim] bool, the desired_goal's columns of goal-conditioned data (lookahead_fixed_goal), set by learn
@@ -604,6 +622,10 @@ class POLA(OfflineAlgorithm):
         # actor's samples need gradients; the target's do not, but a compiled graph traces the differentiable
         # form (the no-grad one rebuilds its weights in Python each call)
         self._sample_actor: Callable[[th.Tensor], th.Tensor] = functools.partial(sample_chain, self.policy.actor)
+        # lookahead_actions="ema": the EMA actor acts at the predicted states, differentiable in the state only
+        self._sample_lookahead = (
+            functools.partial(sample_chain, self.policy.actor_ema) if self.lookahead_actions == "ema" else self._sample_actor
+        )
         if self.compile_update:
             self._sample_target: Callable[[th.Tensor], th.Tensor] = functools.partial(sample_chain, self.policy.actor_ema)
         else:
@@ -978,7 +1000,7 @@ class POLA(OfflineAlgorithm):
             disagreements.append(alive[-1] * disagreement)
             alive.append(alive[-1] * (1.0 - terminal))
             state = next_state if self.backprop_through_model else next_state.detach()
-            action = self._sample_actor(policy.actor_features(state))  # a_{t+i} = pi(s_{t+i})
+            action = self._sample_lookahead(policy.actor_features(state))  # a_{t+i} = pi(s_{t+i}) (or the EMA's)
             states.append(state)
             actions_.append(action)
 
