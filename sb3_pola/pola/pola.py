@@ -224,8 +224,9 @@ class POLA(OfflineAlgorithm):
 
     Eleven defaults depart from the paper, each chosen by measurements in ``docs/results.md`` (issues #12 and #23):
     ``eta=3.94`` with ``lookahead_weight=1/16`` (the Q weight the paper gives all ``T + 1`` states at ``T = 3`` goes
-    to the current state; each predicted state, where the critic never trained, weighs a sixteenth of the paper's:
-    at the paper's weights the actor learned to exploit the critic there, and hopper/medium fell after 30,000 steps),
+    to the current state; each predicted state, where the critic never trained and the actor learned to exploit it,
+    weighs a sixteenth of the paper's: level with the paper's weights at 10,000 steps, above them over 100,000 on
+    halfcheetah/medium-replay; hopper/medium still falls with either),
     ``critic_layer_norm=True`` (LayerNorm critics, as ReBRAC: they bound Q off the data, so the Q term keeps the
     paper's full strength, ``lookahead_normalization="first"`` and no floor, without the actor climbing the critic's
     extrapolation; without them that strength collapsed the locomotion actors within a CPU budget),
@@ -267,12 +268,12 @@ class POLA(OfflineAlgorithm):
         ``T`` (``sum_i gamma^i``, 3.94 at ``T = 3``); ``"weights"``: also divided by
         ``sum_i gamma^i``, so ``eta`` weighs the Q term the same for every ``T``
     :param lookahead_weight: factor ``lambda`` on eq. 3's terms at the predicted states, whose weights become
-        ``lambda gamma^i`` for ``i >= 1`` (before ``lookahead_normalization``): the current state keeps its weight while the
-        predicted states, where the critic never trained, pull less. On hopper/medium the look-ahead's Q weight at the
-        predicted states, not the current state's, is what the actor learns to exploit after 30,000 steps
-        (docs/results.md, eleventh and twelfth passes). Default ``1/16``: with ``eta = 3.94`` each predicted state
-        weighs about 0.24 against the current state's 3.94; ``1``: the paper; ``0``: the states are rolled out but pull
-        nothing. With ``lookahead_target="value_expansion"`` it weighs each expansion ``V_h``, ``h >= 1``
+        ``lambda gamma^i`` for ``i >= 1`` (before ``lookahead_normalization``): the current state keeps its weight while
+        the predicted states, where the critic never trained, pull less. On hopper/medium the actor learns to exploit
+        the critic at the predicted states (docs/results.md, eleventh and twelfth passes). Default ``1/16``: with
+        ``eta = 3.94`` each predicted state weighs about 0.24 against the current state's 3.94 (it does not stop the
+        fall on hopper/medium); ``1``: the paper; ``0``: the states are rolled out but pull nothing. With
+        ``lookahead_target="value_expansion"`` it weighs each expansion ``V_h``, ``h >= 1``
     :param q_scale_floor: lower bound of the detached ``mean |Q|`` that divides the Q term. ``None``:
         Diffusion-QL's batch mean alone (the paper; default). ``"auto"``: the dataset's value scale
         ``mean |r| / (1 - gamma)``,
