@@ -364,3 +364,12 @@ for s in 0 1 2; do
       --kwargs '{"eta": 3.94, "lookahead_weight": 0.0625}'
   done
 done
+
+# 2026-12-04 (twelfth pass). eta 3.94 and lookahead_weight 1/16 became the defaults: every block above ran the defaults
+# of its day, so from here on reproduce them with '"eta": 1.0, "lookahead_weight": 1.0' added to their kwargs. The
+# twelfth pass's runs are long: the new defaults over 100k steps on both long-run datasets, and the EMA look-ahead
+# actions (new option lookahead_actions) at the paper's weights on hopper/medium seed 1, eager.
+OUT=outputs/long100k_la16 bash experiments/long100k/run.sh "0 1 2" "hopper/medium-v0 halfcheetah/medium-replay-v0"
+OUT=outputs/long100k_ema VARIANTS=T3 \
+  EXTRA='{"eta": 1.0, "lookahead_weight": 1.0, "lookahead_actions": "ema", "backprop_through_model": true, "compile_update": false}' \
+  bash experiments/long100k/run.sh 1 hopper/medium-v0
