@@ -347,16 +347,18 @@ def test_compiled_mish_equals_mish():
 
 @pytest.mark.slow  # torch.compile for minutes; the fallback path: test_compile_update_falls_back_to_eager
 @pytest.mark.parametrize(
-    "cudagraph_path, critic_diversity, model_td_weight", [(False, 0.0, 0.0), (True, 0.0, 0.0), (False, 0.5, 1.0)]
+    "cudagraph_path, critic_diversity, model_td_weight, lookahead_actions",
+    [(False, 0.0, 0.0, "actor"), (True, 0.0, 0.0, "actor"), (False, 0.5, 1.0, "actor"), (False, 0.0, 0.0, "ema")],
 )
-def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diversity, model_td_weight):
+def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diversity, model_td_weight, lookahead_actions):
     """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
 
     ``cudagraph_path`` runs the CUDA code path on CPU (inductor's ``triton.cudagraphs`` option, step marks, output
     copies); inductor captures graphs only on CUDA, so this checks the plumbing, not the capture. With
     ``critic_diversity`` the critic loss holds the similarity term's input gradients written out
     (sb3_pola.common.input_gradients), which a compiled graph differentiates once; with ``model_td_weight`` it also
-    holds the model rollouts' TD loss.
+    holds the model rollouts' TD loss; with ``lookahead_actions="ema"`` the EMA actor acts in the look-ahead, the
+    gradient through the model.
     """
     from torch._dynamo.utils import counters
 
@@ -375,6 +377,8 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diver
         dynamics_kwargs={"n_members": 2, "n_elites": 2, "hidden_dim": 8, "n_layers": 1},
         critic_diversity=critic_diversity,
         model_td_weight=model_td_weight,
+        lookahead_actions=lookahead_actions,
+        backprop_through_model=lookahead_actions == "ema",
     )
     # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
     th._dynamo.reset()
