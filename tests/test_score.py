@@ -205,6 +205,16 @@ def test_eta_warmup_from_json() -> None:
     assert grid_variants.pola_kwargs({"eta_warmup": [0.5, 0.2]})["eta"](0.2) == 3.94  # the package default
 
 
+def test_cosine_learning_rate_from_json() -> None:
+    """``"lr_cos"`` reproduces the runs made before the constant learning rate became the default (#23)."""
+    from sb3_pola.common.schedules import CosineSchedule
+
+    kwargs = grid_variants.pola_kwargs({"lr_cos": 1e-3, "eta": 2.0})
+    assert isinstance(kwargs["learning_rate"], CosineSchedule) and "lr_cos" not in kwargs
+    assert kwargs["learning_rate"](1.0) == pytest.approx(1e-3) and kwargs["learning_rate"](0.0) == 0.0
+    assert "learning_rate" not in grid_variants.pola_kwargs({"eta": 2.0})  # the package default: 1e-3, constant
+
+
 def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
     """--eval-rule stochastic scores with one seeded sample of the chain and leaves training as it was."""
     import torch as th
@@ -216,10 +226,10 @@ def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.P
     # 46209b7d80, 824efa1128 before #23's LayerNorm critics; c8dd8105f2, 4c8e7685a9 before #23's maturity gate, whose
     # explicit eta_gate=None in PAPER_FORM changes the paper's too; 08455f37e6, 97f527da8d before #23's "returns" floor
     # and critic start; 7094a5d722, c1594669b0 before #23's fixed goal in the look-ahead; 20c38ed775, e9625c50e1 before
-    # #23's eta 3.94 and lookahead_weight 1/16, which PAPER_FORM now names), so that a folder of the old defaults is
-    # not resumed under the new ones
+    # #23's eta 3.94 and lookahead_weight 1/16, which PAPER_FORM now names; bd27d4080b, 9f44ccef5c before #23's
+    # constant learning rate), so that a folder of the old defaults is not resumed under the new ones
     presets = grid_variants.PRESETS
-    assert presets["cpu"].signature() == "bd27d4080b" and presets["paper"].signature() == "9f44ccef5c"
+    assert presets["cpu"].signature() == "888d5085a7" and presets["paper"].signature() == "414bf21ef7"
     base, sampled = tmp_path / "ema", tmp_path / "stochastic"
     assert run(score_data, base, "--variants", "T1", "--seeds", "0") == 0
     assert run(score_data, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0

@@ -25,7 +25,7 @@ from stable_baselines3.common.logger import configure
 from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset, make_env
 from sb3_pola.common.evaluation import evaluate
-from sb3_pola.common.schedules import cosine_schedule
+from sb3_pola.grid.variants import pola_kwargs
 
 # the cpu preset's sizes (sb3-pola score --preset cpu), eager
 CPU: dict[str, Any] = {
@@ -56,9 +56,7 @@ def main() -> None:
     parser.add_argument("--out", default="outputs/policy_quality")
     args = parser.parse_args()
     th.set_num_threads(1)
-    kwargs = {**CPU, **json.loads(args.kwargs)}
-    if "lr_cos" in kwargs:
-        kwargs["learning_rate"] = cosine_schedule(kwargs.pop("lr_cos"))
+    kwargs = pola_kwargs({**CPU, **json.loads(args.kwargs)})  # "lr_cos": X, a cosine decay from X, as the grid
     policy_kwargs = {"net_arch": [128, 128], **kwargs.pop("policy_kwargs", {})}
     data = load_offline_dataset(args.dataset)
     folder = pathlib.Path(args.out) / args.dataset.replace("/", "_")

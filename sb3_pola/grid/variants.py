@@ -18,7 +18,7 @@ from typing import Any
 import torch as th
 
 from sb3_pola.common.errors import UsageError
-from sb3_pola.common.schedules import WarmupSchedule
+from sb3_pola.common.schedules import WarmupSchedule, cosine_schedule
 from sb3_pola.pola import PAPER_FORM, POLA
 
 # name -> (label for legends, POLA keyword arguments, policy_kwargs)
@@ -121,7 +121,7 @@ class Config:
         changed = {key: value for key, value in pola_defaults(PAPER_FORM).items() if value != PAPER_FORM[key]}
         if changed:
             data["pola_defaults"] = changed
-        # repr: a schedule default (the cosine learning rate) is not JSON; its repr names its parameters
+        # repr: a schedule (a learning rate given as one) is not JSON; its repr names its parameters
         return hashlib.sha1(json.dumps(data, sort_keys=True, default=repr).encode()).hexdigest()[:10]
 
 
@@ -216,8 +216,11 @@ def _json(value: str | dict[str, Any]) -> dict[str, Any]:
 
 def pola_kwargs(extra: dict[str, Any]) -> dict[str, Any]:
     """POLA keyword arguments from JSON-able ones: ``"eta_warmup": [warmup, ramp]`` becomes a
-    :class:`~sb3_pola.common.schedules.WarmupSchedule` of ``eta`` (behaviour cloning, then a linear ramp)."""
+    :class:`~sb3_pola.common.schedules.WarmupSchedule` of ``eta`` (behaviour cloning, then a linear ramp);
+    ``"lr_cos": X`` a cosine decay of ``learning_rate`` from X to 0 (the default before #23's thirteenth pass)."""
     kwargs = dict(extra)
+    if "lr_cos" in kwargs:
+        kwargs["learning_rate"] = cosine_schedule(float(kwargs.pop("lr_cos")))
     if "eta_warmup" in kwargs:
         warmup, ramp = kwargs.pop("eta_warmup")
         eta = float(kwargs.get("eta", pola_defaults(["eta"])["eta"]))

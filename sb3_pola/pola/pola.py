@@ -27,7 +27,6 @@ from sb3_pola.common.dynamics_trainer import DynamicsTrainer, auto_max_steps, ch
 from sb3_pola.common.errors import HyperparameterError
 from sb3_pola.common.input_gradients import explicit_input_gradients, input_gradient_fn
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
-from sb3_pola.common.schedules import cosine_schedule
 from sb3_pola.common.termination import TerminationFn, get_termination_fn
 from sb3_pola.common.validation import check_choice, check_float, check_float_or_schedule, check_int
 from sb3_pola.pola.export import export_policy
@@ -56,11 +55,11 @@ LOOKAHEAD_ACTIONS = ("actor", "ema")
 ETA_GATES = (None, "critic_maturity")
 GOAL_SWITCHES = (None, "terminal", "relabel")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
-DEFAULT_LEARNING_RATE = cosine_schedule(1e-3)  # Diffusion-QL's cosine decay; the imitation screens of #23
+DEFAULT_LEARNING_RATE = 1e-3  # constant, as SB3; a cosine decay to 0 over a short budget starved the Q term (#23)
 GRADIENT_RATIO_FREQ = 100  # gradient steps between two measurements of train/q_bc_grad_ratio
 # the paper's form (eq. 3/4 as written, Diffusion-QL's divisor, no ensemble-similarity term, the actor's gradient
-# through the model, the DDPM noise target of eq. 6, a constant learning rate): POLA(..., **PAPER_FORM); the defaults
-# depart from it (docstring)
+# through the model, the DDPM noise target of eq. 6, Diffusion-QL's learning rate 3e-4): POLA(..., **PAPER_FORM);
+# the defaults depart from it (docstring)
 PAPER_FORM: dict[str, Any] = {
     "eta": 1.0,
     "lookahead_weight": 1.0,
@@ -233,7 +232,8 @@ class POLA(OfflineAlgorithm):
     ``critic_diversity=1`` (EDAC's term: without it the ensemble agreed so closely that its minimum was no
     pessimism), ``backprop_through_model=False`` (the actor steered the model into states the critic overvalued),
     ``prediction_type="sample"`` (the actor regresses the clean action: it imitates as well as a plain MSE
-    regressor, the noise target did not), a cosine learning rate from 1e-3, ``target_q_floor="returns"`` (the
+    regressor, the noise target did not), a constant learning rate of 1e-3 (a cosine decay to 0 over ``learn``
+    left the critic and the Q term half the progress within a CPU budget), ``target_q_floor="returns"`` (the
     critic's target floored at the data's return-to-go: within a CPU budget the bootstrapped critic sees only a few
     dozen steps ahead, too few for the pendulum's drift or Hopper's falls), ``critic_init_value="returns"`` (the
     critics' output starts at the data's mean return-to-go: with the floor and Q starting at 0, HalfCheetah's critic
@@ -250,8 +250,8 @@ class POLA(OfflineAlgorithm):
     :param policy: policy class or alias (``"MlpPolicy"``)
     :param env: env (or id) for evaluation callbacks; made from the dataset's metadata if ``None``
     :param dataset: Minari dataset id, path to a Minari dataset folder, or ``minari.MinariDataset``
-    :param learning_rate: learning rate of actor and critic (Adam), a float or a schedule (default: a cosine decay
-        from 1e-3 to 0 over ``learn``, :func:`~sb3_pola.common.schedules.cosine_schedule`)
+    :param learning_rate: learning rate of actor and critic (Adam), a float or a schedule (default: 1e-3, constant;
+        :func:`~sb3_pola.common.schedules.cosine_schedule` gives Diffusion-QL's cosine decay)
     :param batch_size: minibatch size
     :param tau: Polyak coefficient of the target critics
     :param gamma: discount factor, also the weight ``gamma^i`` of the ``i``-th look-ahead term (eq. 3)
