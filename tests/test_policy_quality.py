@@ -458,6 +458,28 @@ def test_cosine_schedule_values_and_use_as_learning_rate():
     assert model.critic.optimizer.param_groups[0]["lr"] == pytest.approx(5e-4)
 
 
+def test_critic_learning_rate_is_the_critics_own_and_survives_save(tmp_path):
+    """#23: ``critic_learning_rate`` sets the critics' rate apart from ``learning_rate`` (the actor's); unset, both
+    follow ``learning_rate`` as in SB3."""
+    from sb3_pola.common.schedules import cosine_schedule
+
+    data = synthetic_dataset(200, 3, 2)
+    model = model_on_dataset(data, **light(rollout_length=0, learning_rate=cosine_schedule(1e-3), critic_learning_rate=5e-4))
+    model._current_progress_remaining = 0.5
+    model.train(1, batch_size=32)
+    actor_lr = model.actor.optimizer.param_groups[0]["lr"]
+    assert actor_lr == pytest.approx(cosine_schedule(1e-3)(0.5))
+    assert all(group["lr"] == 5e-4 for group in model.critic.optimizer.param_groups)
+    model.save(tmp_path / "m.zip")
+    loaded = type(model).load(tmp_path / "m.zip", dataset=data)
+    assert loaded.critic_learning_rate == 5e-4 and loaded.critic_lr_schedule(0.0) == 5e-4
+    same = model_on_dataset(data, **light(rollout_length=0, learning_rate=2e-4))
+    same.train(1, batch_size=32)
+    assert same.critic_lr_schedule is None and same.critic.optimizer.param_groups[0]["lr"] == 2e-4
+    with pytest.raises(ValueError, match="critic_learning_rate"):
+        model_on_dataset(data, **light(critic_learning_rate=0.0))
+
+
 # ---------------------------------------------------------------- the dynamics fit
 def test_default_dynamics_fit_beats_the_plain_nll_on_the_shipped_data():
     from sb3_pola.common.datasets import load_offline_dataset

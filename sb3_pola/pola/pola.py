@@ -13,7 +13,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, ReplayBufferSamples, Schedule
-from stable_baselines3.common.utils import FloatSchedule
+from stable_baselines3.common.utils import FloatSchedule, update_learning_rate
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_pola.common.buffers import OfflineReplayBuffer
@@ -118,6 +118,7 @@ def check_pola_arguments(
     lookahead_fixed_goal: bool,
     lookahead_target: str,
     lookahead_actions: str,
+    critic_learning_rate: float | Schedule | None,
     backprop_through_model: bool,
     model_td_weight: float,
     model_conservatism: float,
@@ -176,6 +177,8 @@ def check_pola_arguments(
     check_choice("lookahead_target", lookahead_target, LOOKAHEAD_TARGETS)
     check_float("lookahead_weight", lookahead_weight, low=0.0)
     check_choice("lookahead_actions", lookahead_actions, LOOKAHEAD_ACTIONS)
+    if critic_learning_rate is not None:
+        check_float_or_schedule("critic_learning_rate", critic_learning_rate, low=0.0, low_open=True)
     if lookahead_actions == "ema" and not backprop_through_model:
         raise HyperparameterError(
             "lookahead_actions='ema' trains the actor through the model only; it needs backprop_through_model=True"
@@ -383,6 +386,8 @@ class POLA(OfflineAlgorithm):
     :param prediction_type: the actor network's target: ``"epsilon"``, the noise (eq. 6 as written), or
         ``"sample"``, the clean action (:class:`~sb3_pola.pola.policies.DiffusionActor`)
     :param use_state_products: give the actor the pairwise state products (section V)
+    :param critic_learning_rate: the critics' own learning rate, a float or a schedule, as d3rlpy's
+        ``critic_learning_rate`` (``None``, the default: ``learning_rate``, as SB3)
     :param max_grad_norm: gradient-norm clipping of actor and critic (``None`` disables it)
     :param ema_decay: decay of the EMA actor used for targets and ``predict``
     :param ema_update_freq: gradient steps between EMA updates
@@ -457,6 +462,7 @@ class POLA(OfflineAlgorithm):
         beta_schedule: str = "vp",
         prediction_type: str = "sample",
         use_state_products: bool = True,
+        critic_learning_rate: float | Schedule | None = None,
         max_grad_norm: float | None = 1.0,
         ema_decay: float = 0.995,
         ema_update_freq: int = 5,
@@ -498,6 +504,7 @@ class POLA(OfflineAlgorithm):
             lookahead_fixed_goal=lookahead_fixed_goal,
             lookahead_target=lookahead_target,
             lookahead_actions=lookahead_actions,
+            critic_learning_rate=critic_learning_rate,
             backprop_through_model=backprop_through_model,
             model_td_weight=model_td_weight,
             model_conservatism=model_conservatism,
@@ -571,6 +578,7 @@ class POLA(OfflineAlgorithm):
         self.prediction_type = prediction_type
         self.use_state_products = use_state_products
         self.max_grad_norm = max_grad_norm
+        self.critic_learning_rate = critic_learning_rate
         self.ema_decay = ema_decay
         self.ema_update_freq = ema_update_freq
         self.ema_start = ema_start
@@ -589,6 +597,9 @@ class POLA(OfflineAlgorithm):
 
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
+        self.critic_lr_schedule: Schedule | None = None
+        if self.critic_learning_rate is not None:  # the critics' own rate (the actor keeps learning_rate)
+            self.critic_lr_schedule = FloatSchedule(self.critic_learning_rate)
         self.eta_schedule = FloatSchedule(self.eta)
         self.set_random_seed(self.seed)
         self._termination_fn: TerminationFn | None = get_termination_fn(self.env_id)
@@ -671,6 +682,7 @@ class POLA(OfflineAlgorithm):
             "_goal_mask",
             "_actor_loss_fn",
             "eta_schedule",
+            "critic_lr_schedule",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -784,7 +796,13 @@ class POLA(OfflineAlgorithm):
     # ------------------------------------------------------------------ one gradient step
     def train(self, gradient_steps: int, batch_size: int = 256) -> None:
         self.policy.set_training_mode(True)
-        self._update_learning_rate([self.actor.optimizer, self.critic.optimizer])
+        if self.critic_lr_schedule is None:
+            self._update_learning_rate([self.actor.optimizer, self.critic.optimizer])
+        else:
+            self._update_learning_rate(self.actor.optimizer)
+            critic_lr = self.critic_lr_schedule(self._current_progress_remaining)
+            self.logger.record("train/critic_learning_rate", critic_lr)
+            update_learning_rate(self.critic.optimizer, critic_lr)
         buffer = self._setup_offline_data()
         for _ in range(gradient_steps):
             indices = buffer.sample_indices(batch_size)
