@@ -373,3 +373,26 @@ OUT=outputs/long100k_la16 bash experiments/long100k/run.sh "0 1 2" "hopper/mediu
 OUT=outputs/long100k_ema VARIANTS=T3 \
   EXTRA='{"eta": 1.0, "lookahead_weight": 1.0, "lookahead_actions": "ema", "backprop_through_model": true, "compile_update": false}' \
   bash experiments/long100k/run.sh 1 hopper/medium-v0
+
+# 2026-12-04 (thirteenth pass). The constant learning rate 1e-3 (LRC; it became the default, commit c7f58fc), with
+# T = 0 (T0LRC) and BC (BCLRC) at it; the split screen LRS (actor cosine from 1e-3, critics constant 1e-3, new option
+# critic_learning_rate). From here on the blocks above reproduce with '"lr_cos": 0.001' added to their kwargs or EXTRA.
+# The main job at the constant rate: sb3-pola run --seed S (S = 0, 1, 2).
+for s in 0 1 2; do
+  for d in hopper/medium-v0 halfcheetah/medium-replay-v0 pointmaze/umaze-v0 hopper/medium-replay-v0 pointmaze/medium-v0 halfcheetah/medium-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name LRC --rules noisefree,obsnoise \
+      --kwargs '{"learning_rate": 0.001, "compile_update": true}'
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0LRC --rules noisefree,obsnoise \
+      --kwargs '{"rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name BCLRC --rules noisefree,obsnoise \
+      --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+  done
+  for d in hopper/medium-v0 pointmaze/umaze-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name LRS --rules noisefree,obsnoise \
+      --kwargs '{"lr_cos": 0.001, "critic_learning_rate": 0.001, "compile_update": true}'
+  done
+done
+# the EMA look-ahead at the paper's weights, seed 0 compiled (seed 1: the twelfth pass's eager run)
+OUT=outputs/long100k_ema_c VARIANTS=T3 \
+  EXTRA='{"eta": 1.0, "lookahead_weight": 1.0, "lookahead_actions": "ema", "backprop_through_model": true, "lr_cos": 0.001}' \
+  bash experiments/long100k/run.sh 0 hopper/medium-v0
