@@ -55,7 +55,7 @@ LOOKAHEAD_ACTIONS = ("actor", "ema")
 ETA_GATES = (None, "critic_maturity")
 GOAL_SWITCHES = (None, "terminal", "relabel")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
-DEFAULT_LEARNING_RATE = 1e-3  # constant, as SB3; a cosine decay to 0 over a short budget starved the Q term (#23)
+DEFAULT_LEARNING_RATE = 1e-3  # constant, as SB3: a cosine decay to 0 over a short budget starved the Q term (#23)
 GRADIENT_RATIO_FREQ = 100  # gradient steps between two measurements of train/q_bc_grad_ratio
 # the paper's form (eq. 3/4 as written, Diffusion-QL's divisor, no ensemble-similarity term, the actor's gradient
 # through the model, the DDPM noise target of eq. 6, Diffusion-QL's learning rate 3e-4): POLA(..., **PAPER_FORM);
@@ -236,9 +236,10 @@ class POLA(OfflineAlgorithm):
     pessimism), ``backprop_through_model=False`` (the actor steered the model into states the critic overvalued),
     ``prediction_type="sample"`` (the actor regresses the clean action: it imitates as well as a plain MSE
     regressor, the noise target did not), a constant learning rate of 1e-3 (a cosine decay to 0 over ``learn``
-    left the critic and the Q term half the progress within a CPU budget), ``target_q_floor="returns"`` (the
-    critic's target floored at the data's return-to-go: within a CPU budget the bootstrapped critic sees only a few
-    dozen steps ahead, too few for the pendulum's drift or Hopper's falls), ``critic_init_value="returns"`` (the
+    halved the steps within a CPU budget, and the Q term's gain with them; it imitated the U-maze better),
+    ``target_q_floor="returns"`` (the critic's target floored at the data's return-to-go: within a CPU budget the
+    bootstrapped critic sees only a few dozen steps ahead, too few for the pendulum's drift or Hopper's falls),
+    ``critic_init_value="returns"`` (the
     critics' output starts at the data's mean return-to-go: with the floor and Q starting at 0, HalfCheetah's critic
     spent most of the budget climbing to its targets while the actor followed it),
     ``eta_gate="critic_maturity"`` (the Q term is held while the critic's Q at the data is below the data's lowest
