@@ -451,6 +451,11 @@ def test_cosine_schedule_values_and_use_as_learning_rate():
     assert schedule(0.75) == pytest.approx(1e-4 + 9e-4 * 0.5 * (1 + np.cos(np.pi / 4)))
     with pytest.raises(ValueError, match=">= 0"):
         CosineSchedule(-1.0)
+    # held for the first 80%, then the same cosine over the last 20%
+    late = cosine_schedule(1e-3, 0.0, start=0.8)
+    assert [late(p) for p in (1.0, 0.5, 0.2, 0.1, 0.0)] == pytest.approx([1e-3, 1e-3, 1e-3, 5e-4, 0.0])
+    with pytest.raises(ValueError, match="start"):
+        CosineSchedule(1e-3, 0.0, start=1.0)
     model = model_on_dataset(synthetic_dataset(200, 3, 2), **light(rollout_length=0, learning_rate=cosine_schedule(1e-3)))
     model._current_progress_remaining = 0.5
     model.train(gradient_steps=1, batch_size=16)

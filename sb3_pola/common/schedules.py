@@ -40,28 +40,34 @@ def warmup_schedule(value: float, warmup: float = 0.1, ramp: float = 0.1) -> War
 
 
 class CosineSchedule:
-    """Cosine decay from ``initial`` to ``final`` over ``learn`` (Diffusion-QL's learning-rate decay).
+    """Cosine decay from ``initial`` to ``final`` (Diffusion-QL's learning-rate decay), optionally held at ``initial``
+    for the first ``start`` fraction of ``learn`` and decayed over the rest (a warmup-stable-decay shape).
 
     Called with the remaining progress (1 at the start of ``learn``, 0 at the end), as SB3's schedules are:
-    ``final + (initial - final) (1 + cos(pi done)) / 2`` with ``done = 1 - progress_remaining``.
+    ``final + (initial - final) (1 + cos(pi x)) / 2`` with ``x = max(done - start, 0) / (1 - start)`` and
+    ``done = 1 - progress_remaining``.
 
     :param initial: the value at the start
     :param final: the value at the end
+    :param start: fraction of training held at ``initial`` before the decay begins (0: decay over all of ``learn``)
     """
 
-    def __init__(self, initial: float, final: float = 0.0) -> None:
+    def __init__(self, initial: float, final: float = 0.0, start: float = 0.0) -> None:
         if initial < 0 or final < 0:
             raise ValueError(f"initial and final must be >= 0, got {initial} and {final}")
-        self.initial, self.final = float(initial), float(final)
+        if not 0.0 <= start < 1.0:
+            raise ValueError(f"start must be a fraction in [0, 1), got {start}")
+        self.initial, self.final, self.start = float(initial), float(final), float(start)
 
     def __call__(self, progress_remaining: float) -> float:
         done = min(max(1.0 - progress_remaining, 0.0), 1.0)
-        return self.final + (self.initial - self.final) * 0.5 * (1.0 + math.cos(math.pi * done))
+        x = max(done - self.start, 0.0) / (1.0 - self.start)
+        return self.final + (self.initial - self.final) * 0.5 * (1.0 + math.cos(math.pi * x))
 
     def __repr__(self) -> str:
-        return f"CosineSchedule(initial={self.initial}, final={self.final})"
+        return f"CosineSchedule(initial={self.initial}, final={self.final}, start={self.start})"
 
 
-def cosine_schedule(initial: float, final: float = 0.0) -> CosineSchedule:
+def cosine_schedule(initial: float, final: float = 0.0, start: float = 0.0) -> CosineSchedule:
     """:class:`CosineSchedule` (SB3 style factory)."""
-    return CosineSchedule(initial, final)
+    return CosineSchedule(initial, final, start)

@@ -217,10 +217,12 @@ def _json(value: str | dict[str, Any]) -> dict[str, Any]:
 def pola_kwargs(extra: dict[str, Any]) -> dict[str, Any]:
     """POLA keyword arguments from JSON-able ones: ``"eta_warmup": [warmup, ramp]`` becomes a
     :class:`~sb3_pola.common.schedules.WarmupSchedule` of ``eta`` (behaviour cloning, then a linear ramp);
-    ``"lr_cos": X`` a cosine decay of ``learning_rate`` from X to 0 (the default before #23's thirteenth pass)."""
+    ``"lr_cos": X`` a cosine decay of ``learning_rate`` from X to 0 (the default before #23's thirteenth pass),
+    ``"lr_cos": [X, final, start]`` one from X to ``final`` that begins after the ``start`` fraction of training."""
     kwargs = dict(extra)
     if "lr_cos" in kwargs:
-        kwargs["learning_rate"] = cosine_schedule(float(kwargs.pop("lr_cos")))
+        lr_cos = kwargs.pop("lr_cos")
+        kwargs["learning_rate"] = cosine_schedule(*map(float, lr_cos if isinstance(lr_cos, list) else [lr_cos]))
     if "eta_warmup" in kwargs:
         warmup, ramp = kwargs.pop("eta_warmup")
         eta = float(kwargs.get("eta", pola_defaults(["eta"])["eta"]))
