@@ -396,3 +396,28 @@ done
 OUT=outputs/long100k_ema_c VARIANTS=T3 \
   EXTRA='{"eta": 1.0, "lookahead_weight": 1.0, "lookahead_actions": "ema", "backprop_through_model": true, "lr_cos": 0.001}' \
   bash experiments/long100k/run.sh 0 hopper/medium-v0
+
+# 2026-12-04 (fourteenth pass). Screens of the rate against the U-maze's imitation floor: the rate held and decayed
+# over the last 20% (WSD80, BCWSD80; new cosine_schedule(start=...), '"lr_cos": [X, final, start]'), BC at a constant
+# 3e-4 and 5e-4 (BCLR3, BCLR5), the actor at 5e-4 with the critics at 1e-3 (LRA5); hindsight-relabelled goal switches
+# at the defaults (GRLRC). Hopper rows of WSD80, BCLR5 and LRA5 are seed 0 only (stopped once the mazes decided).
+for s in 0 1 2; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name BCWSD80 --rules noisefree,obsnoise \
+    --kwargs '{"lr_cos": [0.001, 0.0, 0.8], "eta": 0.0, "rollout_length": 0, "compile_update": true}'
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name BCLR3 --rules noisefree,obsnoise \
+    --kwargs '{"learning_rate": 0.0003, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name BCLR5 --rules noisefree,obsnoise \
+      --kwargs '{"learning_rate": 0.0005, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name GRLRC --rules noisefree,obsnoise \
+      --kwargs '{"goal_switches": "relabel", "compile_update": true}'
+  done
+done
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name WSD80 --rules noisefree,obsnoise \
+  --kwargs '{"lr_cos": [0.001, 0.0, 0.8], "compile_update": true}'
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name BCLR5 --rules noisefree,obsnoise \
+  --kwargs '{"learning_rate": 0.0005, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
+"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name LRA5 --rules noisefree,obsnoise \
+  --kwargs '{"learning_rate": 0.0005, "critic_learning_rate": 0.001, "compile_update": true}'
+# the defaults over 100k (constant rate): hopper/medium seeds 0, 1, 2 and halfcheetah/medium-replay seeds 0, 1, 2
+OUT=outputs/long100k_lrc VARIANTS=T3 bash experiments/long100k/run.sh "0 1 2"
