@@ -205,9 +205,11 @@ def test_goal_switches_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, tmp
     assert data.dones.sum() == 0  # the original is left alone
     model = POLA("MlpPolicy", dataset=data, goal_switches="terminal", **light_kwargs())
     np.testing.assert_array_equal(model.offline_data.dones.astype(bool), switches)
-    assert not POLA("MlpPolicy", dataset=data, **light_kwargs()).offline_data.dones.any()  # off by default
-    # relabelled: the switch keeps its goal, and the env's reward of it says the policy is still there
-    model = POLA("MlpPolicy", dataset=data, goal_switches="relabel", **light_kwargs())
+    as_recorded = POLA("MlpPolicy", dataset=data, goal_switches=None, **light_kwargs()).offline_data
+    assert as_recorded.goal_switches().sum() == switches.sum() and not as_recorded.dones.any()
+    # relabelled (the default): the switch keeps its goal, and the env's reward of it says the policy is still there
+    model = POLA("MlpPolicy", dataset=data, **light_kwargs())
+    assert model.goal_switches == "relabel"
     relabelled = model.offline_data
     assert not relabelled.goal_switches().any() and not relabelled.dones.any()
     np.testing.assert_array_equal(relabelled.next_observations[switches, goal], data.observations[switches, goal])

@@ -303,6 +303,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "target_q_floor": None,
         "critic_init_value": None,
         "lookahead_fixed_goal": False,
+        "goal_switches": None,
     }
     # the Q term at the paper's strength, bounded by LayerNorm critics (#23; #12's weakened form stays an option)
     shared = {"lookahead_normalization", "q_scale_floor"}
@@ -321,6 +322,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
     # a constant 1e-3 to the end of learn (#23's thirteenth pass; the cosine decay to 0 before it)
     assert default.learning_rate == 1e-3 and default.lr_schedule(0.0) == pytest.approx(1e-3)
     assert default.policy.deterministic_rule == "observation_noise"
+    assert default.goal_switches == "relabel"  # #23's fourteenth pass (None before)
     assert default.policy.dynamics is not None and default.policy.dynamics.mean_loss == "beta_nll"
     # in the update: the similarity term is on by default, off in the paper's form
     for model, on in ((default, True), (paper, False)):

@@ -1,8 +1,10 @@
 """Issue #23's maze diagnostic: does a policy stay at the goal once it reaches it?
 
-    python experiments/policy_quality/goal_stay.py MODEL.zip [MODEL.zip ...] [--dataset pointmaze/umaze-v0]
+    python experiments/policy_quality/goal_stay.py MODEL.zip [MODEL.zip ...] [--dataset pointmaze/umaze-v0] \
+        [--episodes 4] [--reset-seed 100]
 
-For each saved model, runs ``--episodes`` episodes (reset seeds 100, 101, ...) with ``predict(deterministic=True)``
+For each saved model, runs ``--episodes`` episodes (reset seeds 100, 101, ...; the score protocol's for seed S:
+``--reset-seed 10000*(S+1)``) with ``predict(deterministic=True)``
 and prints per episode the step the goal is first reached, the return (the rewarded steps: the maze pays 1 per
 step at the goal) and how often the policy left the goal after being there. The mazes' datasets never show a policy
 staying at a goal: their collectors draw a new goal the step the old one is reached
@@ -24,6 +26,7 @@ def main() -> None:
     parser.add_argument("models", nargs="+")
     parser.add_argument("--dataset", default="pointmaze/umaze-v0")
     parser.add_argument("--episodes", type=int, default=4)
+    parser.add_argument("--reset-seed", type=int, default=100)
     args = parser.parse_args()
     th.set_num_threads(1)
     for path in args.models:
@@ -31,7 +34,7 @@ def main() -> None:
         env = make_env(args.dataset)
         rows = []
         for episode in range(args.episodes):
-            obs, _ = env.reset(seed=100 + episode)
+            obs, _ = env.reset(seed=args.reset_seed + episode)
             first, total, leaves, previous, step = None, 0.0, 0, 0.0, 0
             while True:
                 action, _ = model.predict(obs, deterministic=True)

@@ -74,6 +74,7 @@ PAPER_FORM: dict[str, Any] = {
     "target_q_floor": None,
     "critic_init_value": None,
     "lookahead_fixed_goal": False,
+    "goal_switches": None,
 }
 
 
@@ -310,8 +311,9 @@ class POLA(OfflineAlgorithm):
         collectors draw a new goal the step the old one is reached, so the critic bootstraps the step after reaching a
         goal from a state whose goal is elsewhere, and no transition shows staying at a goal, which is what the
         maze's evaluation pays for. ``"terminal"``: those transitions end their goal's episode; ``"relabel"``: they
-        keep their own goal and the env's reward of it (hindsight relabelling, the env's ``compute_reward``);
-        ``None``: the data as recorded (default)
+        keep their own goal and the env's reward of it (hindsight relabelling, the env's ``compute_reward``;
+        default since #23's fourteenth pass, which it lifted on both mazes: docs/results.md);
+        ``None``: the data as recorded (the paper). No effect on data without a ``desired_goal``
     :param critic_diversity: weight ``eta_ES`` of EDAC's ensemble-similarity term added to the critic loss
         (:func:`ensemble_similarity`): it decorrelates the members' action gradients at the data, so that they
         disagree off it and the minimum over the ensemble (targets) and its top-K (eq. 4) are pessimistic where the
@@ -444,7 +446,7 @@ class POLA(OfflineAlgorithm):
         target_q_floor: float | str | None = "returns",
         reward_scale: float = 1.0,
         critic_init_value: float | str | None = "returns",
-        goal_switches: str | None = None,
+        goal_switches: str | None = "relabel",
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
