@@ -400,17 +400,23 @@ OUT=outputs/long100k_ema_c VARIANTS=T3 \
 # 2026-12-04 (fourteenth pass). Screens of the rate against the U-maze's imitation floor: the rate held and decayed
 # over the last 20% (WSD80, BCWSD80; new cosine_schedule(start=...), '"lr_cos": [X, final, start]'), BC at a constant
 # 3e-4 and 5e-4 (BCLR3, BCLR5), the actor at 5e-4 with the critics at 1e-3 (LRA5); hindsight-relabelled goal switches
-# at the defaults (GRLRC). Hopper rows of WSD80, BCLR5 and LRA5 are seed 0 only (stopped once the mazes decided).
+# at the defaults (GRLRC, the new defaults: goal_switches="relabel", commit a857f9b) and at T = 0 (T0GRLRC); BC with
+# a slower EMA actor (BCE999). Hopper rows of WSD80, BCLR5 and LRA5 are seed 0 only (stopped once the mazes decided).
+# From here on the mazes' rows of the blocks above reproduce with '"goal_switches": null' added to their kwargs.
 for s in 0 1 2; do
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name BCWSD80 --rules noisefree,obsnoise \
     --kwargs '{"lr_cos": [0.001, 0.0, 0.8], "eta": 0.0, "rollout_length": 0, "compile_update": true}'
   "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name BCLR3 --rules noisefree,obsnoise \
     --kwargs '{"learning_rate": 0.0003, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name BCE999 --rules noisefree,obsnoise \
+    --kwargs '{"ema_decay": 0.999, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
   for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
     "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name BCLR5 --rules noisefree,obsnoise \
       --kwargs '{"learning_rate": 0.0005, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
     "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name GRLRC --rules noisefree,obsnoise \
       --kwargs '{"goal_switches": "relabel", "compile_update": true}'
+    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0GRLRC --rules noisefree,obsnoise \
+      --kwargs '{"goal_switches": "relabel", "rollout_length": 0, "compile_update": true}'
   done
 done
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name WSD80 --rules noisefree,obsnoise \
@@ -419,5 +425,7 @@ done
   --kwargs '{"learning_rate": 0.0005, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
 "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name LRA5 --rules noisefree,obsnoise \
   --kwargs '{"learning_rate": 0.0005, "critic_learning_rate": 0.001, "compile_update": true}'
-# the defaults over 100k (constant rate): hopper/medium seeds 0, 1, 2 and halfcheetah/medium-replay seeds 0, 1, 2
+# the defaults over 100k (constant rate; goal_switches does nothing on these): hopper/medium and
+# halfcheetah/medium-replay, seeds 0, 1, 2; goal_stay on the U-maze's seed 2 models (the score's resets of seed 2)
+"$PY" experiments/policy_quality/goal_stay.py "$OUT"/pointmaze_umaze-v0/{GRLRC,LRC,BCLRC}/seed2.zip --episodes 10 --reset-seed 30000
 OUT=outputs/long100k_lrc VARIANTS=T3 bash experiments/long100k/run.sh "0 1 2"
