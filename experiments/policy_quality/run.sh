@@ -428,4 +428,8 @@ done
 # the defaults over 100k (constant rate; goal_switches does nothing on these): hopper/medium and
 # halfcheetah/medium-replay, seeds 0, 1, 2; goal_stay on the U-maze's seed 2 models (the score's resets of seed 2)
 "$PY" experiments/policy_quality/goal_stay.py "$OUT"/pointmaze_umaze-v0/{GRLRC,LRC,BCLRC}/seed2.zip --episodes 10 --reset-seed 30000
+# the relabelled defaults' saved maze models under the Q-ranked rule (10 samples; a second call evaluates the saved model)
+for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name GRLRC --rules best10
+done; done
 OUT=outputs/long100k_lrc VARIANTS=T3 bash experiments/long100k/run.sh "0 1 2"
