@@ -427,6 +427,7 @@ done
   --kwargs '{"learning_rate": 0.0005, "critic_learning_rate": 0.001, "compile_update": true}'
 # the defaults over 100k (constant rate; goal_switches does nothing on these): hopper/medium and
 # halfcheetah/medium-replay, seeds 0, 1, 2; goal_stay on the U-maze's seed 2 models (the score's resets of seed 2)
+OUT=outputs/long100k_lrc_bc VARIANTS=BC bash experiments/long100k/run.sh "0 1 2" hopper/medium-v0
 "$PY" experiments/policy_quality/goal_stay.py "$OUT"/pointmaze_umaze-v0/{GRLRC,LRC,BCLRC}/seed2.zip --episodes 10 --reset-seed 30000
 # the relabelled defaults' saved maze models under the Q-ranked rule (10 samples; a second call evaluates the saved model)
 for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
