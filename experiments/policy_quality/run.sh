@@ -403,34 +403,37 @@ OUT=outputs/long100k_ema_c VARIANTS=T3 \
 # at the defaults (GRLRC, the new defaults: goal_switches="relabel", commit a857f9b) and at T = 0 (T0GRLRC); BC with
 # a slower EMA actor (BCE999). Hopper rows of WSD80, BCLR5 and LRA5 are seed 0 only (stopped once the mazes decided).
 # From here on the mazes' rows of the blocks above reproduce with '"goal_switches": null' added to their kwargs.
+# screen ARGS: screen.py into $OUT under the noise-free and obs-noise rules (a later --rules replaces them)
+screen() { "$PY" experiments/policy_quality/screen.py --out "$OUT" --rules noisefree,obsnoise "$@"; }
 for s in 0 1 2; do
-  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name BCWSD80 --rules noisefree,obsnoise \
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCWSD80 \
     --kwargs '{"lr_cos": [0.001, 0.0, 0.8], "eta": 0.0, "rollout_length": 0, "compile_update": true}'
-  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name BCLR3 --rules noisefree,obsnoise \
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCLR3 \
     --kwargs '{"learning_rate": 0.0003, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
-  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset pointmaze/umaze-v0 --seed "$s" --name BCE999 --rules noisefree,obsnoise \
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCE999 \
     --kwargs '{"ema_decay": 0.999, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
   for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
-    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name BCLR5 --rules noisefree,obsnoise \
+    screen --dataset "$d" --seed "$s" --name BCLR5 \
       --kwargs '{"learning_rate": 0.0005, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
-    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name GRLRC --rules noisefree,obsnoise \
+    screen --dataset "$d" --seed "$s" --name GRLRC \
       --kwargs '{"goal_switches": "relabel", "compile_update": true}'
-    "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name T0GRLRC --rules noisefree,obsnoise \
+    screen --dataset "$d" --seed "$s" --name T0GRLRC \
       --kwargs '{"goal_switches": "relabel", "rollout_length": 0, "compile_update": true}'
   done
 done
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name WSD80 --rules noisefree,obsnoise \
+screen --dataset hopper/medium-v0 --seed 0 --name WSD80 \
   --kwargs '{"lr_cos": [0.001, 0.0, 0.8], "compile_update": true}'
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name BCLR5 --rules noisefree,obsnoise \
+screen --dataset hopper/medium-v0 --seed 0 --name BCLR5 \
   --kwargs '{"learning_rate": 0.0005, "eta": 0.0, "rollout_length": 0, "compile_update": true}'
-"$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset hopper/medium-v0 --seed 0 --name LRA5 --rules noisefree,obsnoise \
+screen --dataset hopper/medium-v0 --seed 0 --name LRA5 \
   --kwargs '{"learning_rate": 0.0005, "critic_learning_rate": 0.001, "compile_update": true}'
-# the defaults over 100k (constant rate; goal_switches does nothing on these): hopper/medium and
-# halfcheetah/medium-replay, seeds 0, 1, 2; goal_stay on the U-maze's seed 2 models (the score's resets of seed 2)
-OUT=outputs/long100k_lrc_bc VARIANTS=BC bash experiments/long100k/run.sh "0 1 2" hopper/medium-v0
+# goal_stay on the U-maze's seed 2 models (the score's resets of seed 2)
 "$PY" experiments/policy_quality/goal_stay.py "$OUT"/pointmaze_umaze-v0/{GRLRC,LRC,BCLRC}/seed2.zip --episodes 10 --reset-seed 30000
 # the relabelled defaults' saved maze models under the Q-ranked rule (10 samples; a second call evaluates the saved model)
 for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
-  "$PY" experiments/policy_quality/screen.py --out "$OUT" --dataset "$d" --seed "$s" --name GRLRC --rules best10
+  screen --dataset "$d" --seed "$s" --name GRLRC --rules best10
 done; done
+# the defaults over 100k (constant rate; goal_switches does nothing on these): hopper/medium and
+# halfcheetah/medium-replay, seeds 0, 1, 2; BC with the package's actor at the constant rate on hopper/medium
 OUT=outputs/long100k_lrc VARIANTS=T3 bash experiments/long100k/run.sh "0 1 2"
+OUT=outputs/long100k_lrc_bc VARIANTS=BC bash experiments/long100k/run.sh "0 1 2" hopper/medium-v0

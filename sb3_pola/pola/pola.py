@@ -240,14 +240,14 @@ class POLA(OfflineAlgorithm):
     halved the steps within a CPU budget, and the Q term's gain with them; it imitated the U-maze better),
     ``target_q_floor="returns"`` (the critic's target floored at the data's return-to-go: within a CPU budget the
     bootstrapped critic sees only a few dozen steps ahead, too few for the pendulum's drift or Hopper's falls),
-    ``critic_init_value="returns"`` (the
-    critics' output starts at the data's mean return-to-go: with the floor and Q starting at 0, HalfCheetah's critic
-    spent most of the budget climbing to its targets while the actor followed it),
+    ``critic_init_value="returns"`` (the critics' output starts at the data's mean return-to-go: with the floor and Q
+    starting at 0, HalfCheetah's critic spent most of the budget climbing to its targets while the actor followed it),
     ``eta_gate="critic_maturity"`` (the Q term is held while the critic's Q at the data is below the data's lowest
     value: with plain targets on sparse mazes that was thousands of steps of noise; with the two ``"returns"``
     defaults Q starts at the data's values, so the gate is open from the first step and only closes should Q
-    collapse) and ``lookahead_fixed_goal=True`` (on goal-conditioned data the look-ahead keeps the goal: the model
-    had learned the collectors' goal switches and moved the goal near it). The dynamics model fits with beta-NLL and
+    collapse), ``lookahead_fixed_goal=True`` (on goal-conditioned data the look-ahead keeps the goal: the model
+    had learned the collectors' goal switches and moved the goal near it) and ``goal_switches="relabel"`` (those
+    switches keep their goal and its reward, so the critic sees what staying at a goal is worth). The dynamics model fits with beta-NLL and
     ``predict(deterministic=True)`` draws one sample with the observation's own noise
     (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``; the shipped
     InvertedPendulum main job (``make train``) runs the defaults.
