@@ -247,8 +247,8 @@ class POLA(OfflineAlgorithm):
     defaults Q starts at the data's values, so the gate is open from the first step and only closes should Q
     collapse), ``lookahead_fixed_goal=True`` (on goal-conditioned data the look-ahead keeps the goal: the model
     had learned the collectors' goal switches and moved the goal near it) and ``goal_switches="relabel"`` (those
-    switches keep their goal and its reward, so the critic sees what staying at a goal is worth). The dynamics model fits with beta-NLL and
-    ``predict(deterministic=True)`` draws one sample with the observation's own noise
+    switches keep their goal and its reward, so the critic sees what staying at a goal is worth). The dynamics model
+    fits with beta-NLL and ``predict(deterministic=True)`` draws one sample with the observation's own noise
     (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``; the shipped
     InvertedPendulum main job (``make train``) runs the defaults.
 
