@@ -82,15 +82,9 @@ class DiffusionActor(nn.Module):
         # [B, A + time + F] -> [B, A]
         return self.trunk(self.input_layer(th.cat((x_t, self.time_mlp(t), features), dim=-1)))
 
-    def loss(self, actions: th.Tensor, features: th.Tensor, n_noise_samples: int = 1) -> th.Tensor:
+    def loss(self, actions: th.Tensor, features: th.Tensor) -> th.Tensor:
         """Behaviour-cloning loss ``L_d`` (eq. 6): noise-prediction MSE at a uniformly drawn step (or the clean
-        action's MSE under ``prediction_type="sample"``).
-
-        :param n_noise_samples: draws of the step and the noise per data row, averaged: a Monte-Carlo estimate of
-            eq. 6's expectation over them with less variance (the rows are repeated, ``[K B, ...]``)
-        """
-        if n_noise_samples > 1:
-            actions, features = actions.repeat(n_noise_samples, 1), features.repeat(n_noise_samples, 1)
+        action's MSE under ``prediction_type="sample"``)."""
         t = th.randint(0, self.n_diffusion_steps, (actions.shape[0],), device=actions.device)
         noise = th.randn_like(actions)
         x_t = self.schedule.add_noise(actions, noise, t)

@@ -126,7 +126,6 @@ def check_pola_arguments(
     n_diffusion_steps: int,
     beta_schedule: str,
     prediction_type: str,
-    bc_noise_samples: int,
     max_grad_norm: float | None,
     ema_decay: float,
     ema_update_freq: int,
@@ -190,7 +189,6 @@ def check_pola_arguments(
     check_int("n_diffusion_steps", n_diffusion_steps, low=1)
     check_choice("beta_schedule", beta_schedule, tuple(BETA_SCHEDULES))
     check_choice("prediction_type", prediction_type, PREDICTION_TYPES)
-    check_int("bc_noise_samples", bc_noise_samples, low=1)
     check_float("max_grad_norm", max_grad_norm, low=0.0, low_open=True, optional=True)
     check_float("ema_decay", ema_decay, low=0.0, high=1.0)
     check_int("ema_update_freq", ema_update_freq, low=1)
@@ -390,9 +388,6 @@ class POLA(OfflineAlgorithm):
     :param beta_schedule: noise schedule: ``"vp"`` (default), ``"linear"`` or ``"cosine"``
     :param prediction_type: the actor network's target: ``"epsilon"``, the noise (eq. 6 as written), or
         ``"sample"``, the clean action (:class:`~sb3_pola.pola.policies.DiffusionActor`)
-    :param bc_noise_samples: draws of the diffusion step and noise per data row in the imitation loss (eq. 6),
-        averaged: the same expectation with less gradient noise, at the cost of that many passes of the actor
-        network over the batch in ``L_d`` (the Q term's chains are unchanged). ``1``: the paper's single draw
     :param use_state_products: give the actor the pairwise state products (section V)
     :param critic_learning_rate: the critics' own learning rate, a float or a schedule, as d3rlpy's
         ``critic_learning_rate`` (``None``, the default: ``learning_rate``, as SB3)
@@ -469,7 +464,6 @@ class POLA(OfflineAlgorithm):
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
         prediction_type: str = "sample",
-        bc_noise_samples: int = 1,
         use_state_products: bool = True,
         critic_learning_rate: float | Schedule | None = None,
         max_grad_norm: float | None = 1.0,
@@ -520,7 +514,6 @@ class POLA(OfflineAlgorithm):
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             prediction_type=prediction_type,
-            bc_noise_samples=bc_noise_samples,
             max_grad_norm=max_grad_norm,
             ema_decay=ema_decay,
             ema_update_freq=ema_update_freq,
@@ -586,7 +579,6 @@ class POLA(OfflineAlgorithm):
         self.n_diffusion_steps = n_diffusion_steps
         self.beta_schedule = beta_schedule
         self.prediction_type = prediction_type
-        self.bc_noise_samples = bc_noise_samples
         self.use_state_products = use_state_products
         self.max_grad_norm = max_grad_norm
         self.critic_learning_rate = critic_learning_rate
@@ -877,8 +869,7 @@ class POLA(OfflineAlgorithm):
         params = [p for p in self.actor.parameters() if p.requires_grad]
         with th.random.fork_rng(devices=[self.device] if self.device.type == "cuda" else []), self._critic_frozen():
             features = self.policy.actor_features(obs)
-            bc_loss = self.actor.loss(actions, features, self.bc_noise_samples)
-            bc_grads = th.autograd.grad(bc_loss, params, allow_unused=True)
+            bc_grads = th.autograd.grad(self.actor.loss(actions, features), params, allow_unused=True)
             q_loss, _ = self._lookahead_q_loss(obs, features)
             q_grads = th.autograd.grad(self._eta_value * q_loss, params, allow_unused=True)
 
@@ -982,7 +973,7 @@ class POLA(OfflineAlgorithm):
     def _actor_loss(self, obs: th.Tensor, actions: th.Tensor, eta: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """``L_d + eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor)."""
         features = self.policy.actor_features(obs)
-        bc_loss = self.actor.loss(actions, features, self.bc_noise_samples)
+        bc_loss = self.actor.loss(actions, features)
         stats: dict[str, th.Tensor] = {}
         if not self._behaviour_cloning:
             q_loss, stats = self._lookahead_q_loss(obs, features)
