@@ -437,3 +437,28 @@ done; done
 # halfcheetah/medium-replay, seeds 0, 1, 2; BC with the package's actor at the constant rate on hopper/medium
 OUT=outputs/long100k_lrc VARIANTS=T3 bash experiments/long100k/run.sh "0 1 2"
 OUT=outputs/long100k_lrc_bc VARIANTS=BC bash experiments/long100k/run.sh "0 1 2" hopper/medium-v0
+
+# 2026-12-05 (fifteenth pass). The U-maze's imitation floor against the imitation loss's gradient noise: BC at batch
+# 512 (BCB512); 4 draws of (t, eps) per data row (BCK4, '"bc_noise_samples": 4', an option of commit 18ba7f0,
+# reverted by the next commit since it did not help: run it from 18ba7f0). Then more seeds (3-7) for the cells the
+# done-when leaves within the spread: the defaults (GRLRC) and BC with the package's actor (BCLRC) on both mazes and
+# BC on hopper/medium; d3rlpy's baselines on the same seeds below (`sb3-pola peers`). Tables:
+# experiments/policy_quality/more_seeds.py over screen.jsonl and the peers' csv files (experiments/policy_quality/more_seeds/).
+for s in 0 1 2; do
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCB512 \
+    --kwargs '{"eta": 0.0, "rollout_length": 0, "batch_size": 512, "compile_update": true}'
+done
+for s in 3 4 5 6 7; do
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+    screen --dataset "$d" --seed "$s" --name GRLRC --kwargs '{"goal_switches": "relabel", "compile_update": true}'
+    screen --dataset "$d" --seed "$s" --name BCLRC \
+      --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+  done
+  screen --dataset hopper/medium-v0 --seed "$s" --name BCLRC \
+    --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+done
+# d3rlpy on the same seeds (the U-maze is shipped: its folder is the package's; the others: MINARI_DATASETS_PATH)
+PEERS=(--steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/more_seeds")
+"$PY" -m sb3_pola.cli peers --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --algos bc --seeds 0 1 2 3 4 5 6 7 "${PEERS[@]}"
+"$PY" -m sb3_pola.cli peers --datasets pointmaze/medium-v0 --algos bc iql --seeds 3 4 5 6 7 "${PEERS[@]}"
+"$PY" -m sb3_pola.cli peers --datasets hopper/medium-v0 --algos bc --seeds 3 4 5 6 7 "${PEERS[@]}"

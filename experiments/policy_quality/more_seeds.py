@@ -1,0 +1,87 @@
+"""Issue #23, fifteenth pass: POLA, BC with the package's actor and d3rlpy's baselines over more seeds than the
+done-when's three, from the screen's rows (``screen.jsonl``) and ``sb3-pola peers``' rows (``peers.csv``, the
+final evaluation at ``--step``).
+
+    python experiments/policy_quality/more_seeds.py --screen experiments/policy_quality/screen.jsonl \\
+        --peers experiments/maze_medium/peers.csv experiments/policy_quality/more_seeds/peers.csv \\
+        --dataset pointmaze/umaze-v0 --names GRLRC BCLRC --variants d3rlpy-BC --seeds 0 1 2 3 4 5 6 7
+
+Prints one markdown row per method: every seed's score, the mean and sample std over all seeds and over seeds 0-2, and
+the difference of means to the first method with Welch's standard error (``sqrt(s1^2/n1 + s2^2/n2)``). A screen's
+row is read under ``--rule`` (the obs-noise rule, the package's ``predict``). The last row of a (name, seed) wins.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+
+import numpy as np
+
+
+def std(values: np.ndarray) -> float:
+    """The sample standard deviation (ddof 1), as the package's tables quote it."""
+    return float(values.std(ddof=1)) if len(values) > 1 else 0.0
+
+
+def screen_scores(paths: list[str], dataset: str, name: str, rule: str) -> dict[int, float]:
+    scores: dict[int, float] = {}
+    for path in paths:
+        with open(path) as f:
+            for line in f:
+                row = json.loads(line)
+                if row["dataset"] == dataset and row["name"] == name and rule in row:
+                    scores[int(row["seed"])] = float(row[rule])
+    return scores
+
+
+def peer_scores(paths: list[str], dataset: str, variant: str, step: int) -> dict[int, float]:
+    scores: dict[int, float] = {}
+    for path in paths:
+        with open(path) as f:
+            for row in csv.DictReader(f):
+                if row["dataset"] == dataset and row["variant"] == variant and int(row["step"]) == step:
+                    scores[int(row["seed"])] = float(row["score"])
+    return scores
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--screen", nargs="+", default=[])
+    parser.add_argument("--peers", nargs="+", default=[])
+    parser.add_argument("--dataset", required=True)
+    parser.add_argument("--names", nargs="*", default=[], help="screen names (first: the reference of the differences)")
+    parser.add_argument("--variants", nargs="*", default=[], help="peers' variants, e.g. d3rlpy-BC")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4, 5, 6, 7])
+    parser.add_argument("--rule", default="obsnoise")
+    parser.add_argument("--step", type=int, default=10_000)
+    args = parser.parse_args()
+    methods = [(n, screen_scores(args.screen, args.dataset, n, args.rule)) for n in args.names]
+    methods += [(v, peer_scores(args.peers, args.dataset, v, args.step)) for v in args.variants]
+    print(f"{args.dataset}, seeds {' '.join(map(str, args.seeds))}, step {args.step}")
+    print("| method | per seed | mean ± std (all) | n | seeds 0-2 | difference to the first (± Welch s.e.) |")
+    print("|---|---|---|---|---|---|")
+    ref: np.ndarray | None = None
+    for name, scores in methods:
+        values = np.array([scores[s] for s in args.seeds if s in scores])
+        if len(values) == 0:
+            print(f"| {name} | (no rows) | | 0 | | |")
+            continue
+        first3 = [scores[s] for s in (0, 1, 2) if s in scores]
+        per_seed = ", ".join(f"{scores[s]:.1f}" if s in scores else "-" for s in args.seeds)
+        diff = ""
+        if ref is None:
+            ref = values
+        elif len(values) > 1 and len(ref) > 1:
+            se = math.sqrt(ref.var(ddof=1) / len(ref) + values.var(ddof=1) / len(values))
+            diff = f"{values.mean() - ref.mean():+.1f} ± {se:.1f}"
+        print(
+            f"| {name} | {per_seed} | {values.mean():.1f} ± {std(values):.1f} | {len(values)} | "
+            f"{np.mean(first3):.1f} ± {std(np.array(first3)):.1f} | {diff} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
