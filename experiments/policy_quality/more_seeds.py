@@ -27,6 +27,7 @@ def std(values: np.ndarray) -> float:
 
 
 def screen_scores(paths: list[str], dataset: str, name: str, rule: str) -> dict[int, float]:
+    """``{seed: score}`` of a screen's rows (``rule`` may be ``<rule>_success``, the success rate)."""
     scores: dict[int, float] = {}
     for path in paths:
         with open(path) as f:
@@ -37,13 +38,14 @@ def screen_scores(paths: list[str], dataset: str, name: str, rule: str) -> dict[
     return scores
 
 
-def peer_scores(paths: list[str], dataset: str, variant: str, step: int) -> dict[int, float]:
+def peer_scores(paths: list[str], dataset: str, variant: str, step: int, column: str = "score") -> dict[int, float]:
+    """``{seed: value}`` of the peers' rows at ``step`` (``column``: ``score`` or ``success``)."""
     scores: dict[int, float] = {}
     for path in paths:
         with open(path) as f:
             for row in csv.DictReader(f):
                 if row["dataset"] == dataset and row["variant"] == variant and int(row["step"]) == step:
-                    scores[int(row["seed"])] = float(row["score"])
+                    scores[int(row["seed"])] = float(row[column])
     return scores
 
 
@@ -57,29 +59,35 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4, 5, 6, 7])
     parser.add_argument("--rule", default="obsnoise")
     parser.add_argument("--step", type=int, default=10_000)
+    parser.add_argument(
+        "--success", action="store_true", help="the success rates (goal-conditioned data) in place of the scores"
+    )
     args = parser.parse_args()
-    methods = [(n, screen_scores(args.screen, args.dataset, n, args.rule)) for n in args.names]
-    methods += [(v, peer_scores(args.peers, args.dataset, v, args.step)) for v in args.variants]
-    print(f"{args.dataset}, seeds {' '.join(map(str, args.seeds))}, step {args.step}")
+    rule, column = (args.rule + "_success", "success") if args.success else (args.rule, "score")
+    methods = [(n, screen_scores(args.screen, args.dataset, n, rule)) for n in args.names]
+    methods += [(v, peer_scores(args.peers, args.dataset, v, args.step, column)) for v in args.variants]
+    what = "success rate" if args.success else "score"
+    print(f"{args.dataset}, {what}, seeds {' '.join(map(str, args.seeds))}, step {args.step}")
     print("| method | per seed | mean ± std (all) | n | seeds 0-2 | difference to the first (± Welch s.e.) |")
     print("|---|---|---|---|---|---|")
     ref: np.ndarray | None = None
+    f = ".2f" if args.success else ".1f"
     for name, scores in methods:
         values = np.array([scores[s] for s in args.seeds if s in scores])
         if len(values) == 0:
             print(f"| {name} | (no rows) | | 0 | | |")
             continue
         first3 = [scores[s] for s in (0, 1, 2) if s in scores]
-        per_seed = ", ".join(f"{scores[s]:.1f}" if s in scores else "-" for s in args.seeds)
+        per_seed = ", ".join(f"{scores[s]:{f}}" if s in scores else "-" for s in args.seeds)
         diff = ""
         if ref is None:
             ref = values
         elif len(values) > 1 and len(ref) > 1:
             se = math.sqrt(ref.var(ddof=1) / len(ref) + values.var(ddof=1) / len(values))
-            diff = f"{values.mean() - ref.mean():+.1f} ± {se:.1f}"
+            diff = f"{values.mean() - ref.mean():+{f}} ± {se:{f}}"
         print(
-            f"| {name} | {per_seed} | {values.mean():.1f} ± {std(values):.1f} | {len(values)} | "
-            f"{np.mean(first3):.1f} ± {std(np.array(first3)):.1f} | {diff} |"
+            f"| {name} | {per_seed} | {values.mean():{f}} ± {std(values):{f}} | {len(values)} | "
+            f"{np.mean(first3):{f}} ± {std(np.array(first3)):{f}} | {diff} |"
         )
 
 

@@ -441,8 +441,9 @@ OUT=outputs/long100k_lrc_bc VARIANTS=BC bash experiments/long100k/run.sh "0 1 2"
 # 2026-12-05 (fifteenth pass). The U-maze's imitation floor against the imitation loss's gradient noise: BC at batch
 # 512 (BCB512); 4 draws of (t, eps) per data row (BCK4, '"bc_noise_samples": 4', an option of commit 18ba7f0,
 # reverted by the next commit since it did not help: run it from 18ba7f0). Then more seeds (3-7) for the cells the
-# done-when leaves within the spread: the defaults (GRLRC) and BC with the package's actor (BCLRC) on both mazes and
-# BC on hopper/medium; d3rlpy's baselines on the same seeds below (`sb3-pola peers`). Tables:
+# done-when leaves within the spread: the defaults (GRLRC; on hopper/medium LRC, the same defaults there), T = 0
+# (T0GRLRC) and BC with the package's actor (BCLRC) on both mazes, POLA and BC on hopper/medium; d3rlpy's baselines on
+# the same seeds below (`sb3-pola peers`), then 50-episode evaluations of the U-maze's models. Tables:
 # experiments/policy_quality/more_seeds.py over screen.jsonl and the peers' csv files (experiments/policy_quality/more_seeds/).
 for s in 0 1 2; do
   screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCB512 \
@@ -451,14 +452,28 @@ done
 for s in 3 4 5 6 7; do
   for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
     screen --dataset "$d" --seed "$s" --name GRLRC --kwargs '{"goal_switches": "relabel", "compile_update": true}'
+    screen --dataset "$d" --seed "$s" --name T0GRLRC \
+      --kwargs '{"goal_switches": "relabel", "rollout_length": 0, "compile_update": true}'
     screen --dataset "$d" --seed "$s" --name BCLRC \
       --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
   done
   screen --dataset hopper/medium-v0 --seed "$s" --name BCLRC \
     --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+  screen --dataset hopper/medium-v0 --seed "$s" --name LRC --kwargs '{"learning_rate": 0.001, "compile_update": true}'
 done
 # d3rlpy on the same seeds (the U-maze is shipped: its folder is the package's; the others: MINARI_DATASETS_PATH)
 PEERS=(--steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/more_seeds")
 "$PY" -m sb3_pola.cli peers --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --algos bc --seeds 0 1 2 3 4 5 6 7 "${PEERS[@]}"
-"$PY" -m sb3_pola.cli peers --datasets pointmaze/medium-v0 --algos bc iql --seeds 3 4 5 6 7 "${PEERS[@]}"
+"$PY" -m sb3_pola.cli peers --datasets pointmaze/medium-v0 --algos bc iql --seeds 0 1 2 3 4 5 6 7 "${PEERS[@]}"
 "$PY" -m sb3_pola.cli peers --datasets hopper/medium-v0 --algos bc --seeds 3 4 5 6 7 "${PEERS[@]}"
+
+# the U-maze's saved models of seeds 3-7 on 50 episodes (the score's resets, the first 10 the score's), and d3rlpy BC
+for n in GRLRC BCLRC; do for s in 0 3 4 5 6 7; do
+  m="$OUT/pointmaze_umaze-v0/$n/seed$s.zip"
+  [ -f "$m" ] || continue
+  mkdir -p "$OUT/eval50/pointmaze_umaze-v0/$n" && ln -sf "$(realpath "$m")" "$OUT/eval50/pointmaze_umaze-v0/$n/seed$s.zip"
+  "$PY" experiments/policy_quality/screen.py --out "$OUT/eval50" --dataset pointmaze/umaze-v0 --seed "$s" --name "$n" \
+    --rules obsnoise --episodes 50
+done; done
+"$PY" -m sb3_pola.cli peers --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --algos bc --seeds 3 4 5 6 7 \
+  --steps 10000 --eval-freq 10000 --eval-episodes 50 --threads 1 --out "$OUT/more_seeds50"
