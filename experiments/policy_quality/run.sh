@@ -460,6 +460,8 @@ for s in 3 4 5 6 7; do
   screen --dataset hopper/medium-v0 --seed "$s" --name BCLRC \
     --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
   screen --dataset hopper/medium-v0 --seed "$s" --name LRC --kwargs '{"learning_rate": 0.001, "compile_update": true}'
+  screen --dataset hopper/medium-v0 --seed "$s" --name T0LRC \
+    --kwargs '{"rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
 done
 # d3rlpy on the same seeds (the U-maze is shipped: its folder is the package's; the others: MINARI_DATASETS_PATH)
 PEERS=(--steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/more_seeds")
