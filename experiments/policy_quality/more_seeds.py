@@ -3,7 +3,7 @@ done-when's three, from the screen's rows (``screen.jsonl``) and ``sb3-pola peer
 final evaluation at ``--step``).
 
     python experiments/policy_quality/more_seeds.py --screen experiments/policy_quality/screen.jsonl \\
-        --peers experiments/maze_medium/peers.csv experiments/policy_quality/more_seeds/peers.csv \\
+        --peers experiments/policy_quality/more_seeds/peers.csv \\
         --dataset pointmaze/umaze-v0 --names GRLRC BCLRC --variants d3rlpy-BC --seeds 0 1 2 3 4 5 6 7
 
 Prints one markdown row per method: every seed's score, the mean and sample std over all seeds and over seeds 0-2, and
@@ -14,16 +14,14 @@ row is read under ``--rule`` (the obs-noise rule, the package's ``predict``). Th
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
+import pathlib
 
 import numpy as np
 
-
-def std(values: np.ndarray) -> float:
-    """The sample standard deviation (ddof 1), as the package's tables quote it."""
-    return float(values.std(ddof=1)) if len(values) > 1 else 0.0
+from sb3_pola.grid.report import fmt_rates, fmt_scores
+from sb3_pola.grid.rows import read_rows
 
 
 def screen_scores(paths: list[str], dataset: str, name: str, rule: str) -> dict[int, float]:
@@ -42,10 +40,9 @@ def peer_scores(paths: list[str], dataset: str, variant: str, step: int, column:
     """``{seed: value}`` of the peers' rows at ``step`` (``column``: ``score`` or ``success``)."""
     scores: dict[int, float] = {}
     for path in paths:
-        with open(path) as f:
-            for row in csv.DictReader(f):
-                if row["dataset"] == dataset and row["variant"] == variant and int(row["step"]) == step:
-                    scores[int(row["seed"])] = float(row[column])
+        for row in read_rows(pathlib.Path(path)):
+            if row["dataset"] == dataset and row["variant"] == variant and row["step"] == step:
+                scores[row["seed"]] = row[column]
     return scores
 
 
@@ -71,13 +68,12 @@ def main() -> None:
     print("| method | per seed | mean ± std (all) | n | seeds 0-2 | difference to the first (± Welch s.e.) |")
     print("|---|---|---|---|---|---|")
     ref: np.ndarray | None = None
-    f = ".2f" if args.success else ".1f"
+    f, fmt = (".2f", fmt_rates) if args.success else (".1f", fmt_scores)
     for name, scores in methods:
         values = np.array([scores[s] for s in args.seeds if s in scores])
         if len(values) == 0:
             print(f"| {name} | (no rows) | | 0 | | |")
             continue
-        first3 = [scores[s] for s in (0, 1, 2) if s in scores]
         per_seed = ", ".join(f"{scores[s]:{f}}" if s in scores else "-" for s in args.seeds)
         diff = ""
         if ref is None:
@@ -86,8 +82,8 @@ def main() -> None:
             se = math.sqrt(ref.var(ddof=1) / len(ref) + values.var(ddof=1) / len(values))
             diff = f"{values.mean() - ref.mean():+{f}} ± {se:{f}}"
         print(
-            f"| {name} | {per_seed} | {values.mean():{f}} ± {std(values):{f}} | {len(values)} | "
-            f"{np.mean(first3):{f}} ± {std(np.array(first3)):{f}} | {diff} |"
+            f"| {name} | {per_seed} | {fmt(list(values))} | {len(values)} | "
+            f"{fmt([scores[s] for s in (0, 1, 2) if s in scores])} | {diff} |"
         )
 
 
