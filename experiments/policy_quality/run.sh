@@ -449,16 +449,15 @@ for s in 0 1 2; do
   screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCB512 \
     --kwargs '{"eta": 0.0, "rollout_length": 0, "batch_size": 512, "compile_update": true}'
 done
+BCLRC_KWARGS='{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
 for s in 3 4 5 6 7; do
   for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
     screen --dataset "$d" --seed "$s" --name GRLRC --kwargs '{"goal_switches": "relabel", "compile_update": true}'
     screen --dataset "$d" --seed "$s" --name T0GRLRC \
       --kwargs '{"goal_switches": "relabel", "rollout_length": 0, "compile_update": true}'
-    screen --dataset "$d" --seed "$s" --name BCLRC \
-      --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+    screen --dataset "$d" --seed "$s" --name BCLRC --kwargs "$BCLRC_KWARGS"
   done
-  screen --dataset hopper/medium-v0 --seed "$s" --name BCLRC \
-    --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+  screen --dataset hopper/medium-v0 --seed "$s" --name BCLRC --kwargs "$BCLRC_KWARGS"
   screen --dataset hopper/medium-v0 --seed "$s" --name LRC --kwargs '{"learning_rate": 0.001, "compile_update": true}'
   screen --dataset hopper/medium-v0 --seed "$s" --name T0LRC \
     --kwargs '{"rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
