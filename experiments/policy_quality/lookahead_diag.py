@@ -5,7 +5,9 @@ Reads ``OUT/<dataset>/<name>/seed<S>/progress.csv`` that ``screen.py`` writes (`
 over the last 1,000 steps: the critics' Q at the data's actions (``q_mean``) and at the actor's (``lookahead_q_0``),
 the actor's pessimistic Q at the third predicted state (``lookahead_q_3``), the ensemble's spread at the actor's
 actions over its spread at the data's, the model's disagreement at the third step and the Q term's gradient over the
-BC term's. With the scores of ``OUT/screen.jsonl`` (obs rule). ``python experiments/policy_quality/lookahead_diag.py``
+BC term's. With the scores of ``OUT/screen.jsonl`` (obs rule; the last row of a seed, over the seeds whose statistics
+are there). ``python experiments/policy_quality/lookahead_diag.py [--runs DATASET:T3_NAME:T0_NAME ...]`` (default: the
+eighth pass's names below).
 """
 
 from __future__ import annotations
@@ -36,6 +38,11 @@ COLUMNS = {  # printed name -> how it is made from the last rows of progress.csv
 }
 
 
+def seeds_of(folder: pathlib.Path) -> list[int]:
+    """The seeds whose training statistics ``folder`` holds."""
+    return sorted(int(path.parent.name.removeprefix("seed")) for path in folder.glob("seed*/progress.csv"))
+
+
 def stats(folder: pathlib.Path) -> dict[str, float] | None:
     runs = []
     for path in sorted(folder.glob("seed*/progress.csv")):
@@ -51,21 +58,31 @@ def stats(folder: pathlib.Path) -> dict[str, float] | None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="outputs/policy_quality")
-    out = pathlib.Path(parser.parse_args().out)
-    scores: dict[tuple[str, str], list[float]] = {}
+    parser.add_argument("--runs", nargs="*", help="DATASET:T3_NAME:T0_NAME, e.g. hopper/medium-v0:LRC:T0LRC")
+    args = parser.parse_args()
+    out = pathlib.Path(args.out)
+    runs = RUNS if not args.runs else {r.split(":")[0]: tuple(r.split(":")[1:3]) for r in args.runs}
+    scores: dict[tuple[str, str], dict[int, float]] = {}  # the last obs-rule row of each seed
     for line in (out / "screen.jsonl").read_text().splitlines():
         row = json.loads(line)
-        scores.setdefault((row["dataset"], row["name"]), []).append(row["obsnoise"])
-    print("| dataset | T | score | " + " | ".join(COLUMNS) + " |")
-    print("|---|---|---|" + "---|" * len(COLUMNS))
-    for dataset, names in RUNS.items():
+        if "obsnoise" in row:
+            scores.setdefault((row["dataset"], row["name"]), {})[int(row["seed"])] = row["obsnoise"]
+    print("| dataset | T | seeds | score | " + " | ".join(COLUMNS) + " |")
+    print("|---|---|---|---|" + "---|" * len(COLUMNS))
+    for dataset, names in runs.items():
         for horizon, name in zip((3, 0), names, strict=True):
-            row = stats(out / dataset.replace("/", "_") / name)
+            folder = out / dataset.replace("/", "_") / name
+            row = stats(folder)
             if row is None:
                 continue
-            seeds = scores.get((dataset, name), [])
-            score = f"{statistics.mean(seeds):.1f}" if seeds else "-"
-            print(f"| {dataset} | {horizon} | {score} | " + " | ".join(f"{v:.3g}" for v in row.values()) + " |")
+            seeds = seeds_of(folder)
+            scored = [scores[(dataset, name)][s] for s in seeds if s in scores.get((dataset, name), {})]
+            score = f"{statistics.mean(scored):.1f}" if scored else "-"
+            print(
+                f"| {dataset} | {horizon} | {' '.join(map(str, seeds))} | {score} | "
+                + " | ".join(f"{v:.3g}" for v in row.values())
+                + " |"
+            )
 
 
 if __name__ == "__main__":
