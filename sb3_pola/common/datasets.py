@@ -223,6 +223,41 @@ class OfflineDataset:
         rewards[switches] = np.asarray(relabelled, dtype=rewards.dtype).reshape(-1)
         return dataclasses.replace(self, next_observations=next_obs, rewards=rewards, fingerprint=fingerprint)
 
+    def with_hindsight_goals(self, reward_fn: GoalRewardFn, seed: int = 0) -> OfflineDataset:
+        """A copy with every goal segment (the transitions of an episode between two :meth:`episode_ends`) appended
+        once more, its ``desired_goal`` replaced by the ``achieved_goal`` it reaches at a step drawn uniformly in it
+        and its rewards ``reward_fn(next achieved_goal, that goal)`` (hindsight relabelling, HER's "episode"
+        strategy). The copy passes through its goal and goes on: the critic sees what leaving a goal costs, at
+        speeds and places the collectors' own goals never show. Unchanged without a ``desired_goal``.
+
+        :param reward_fn: the env's reward of goals, batched (``GoalEnv.compute_reward`` without ``info``)
+        :param seed: seed of the relabelled steps
+        """
+        space = self.dict_observation_space
+        if space is None or "desired_goal" not in space.spaces or not len(self):
+            return self
+        goal, achieved = key_slice(space, "desired_goal"), key_slice(space, "achieved_goal")
+        ends = np.flatnonzero(self.episode_ends())
+        starts = np.concatenate([[0], ends[:-1] + 1])
+        rng = np.random.default_rng(seed)
+        # each segment's goal: where it is after its relabelled step  [n_segments, goal_dim]
+        steps = starts + (rng.random(len(starts)) * (ends - starts + 1)).astype(np.int64)
+        goals = np.repeat(self.next_observations[steps, achieved], ends - starts + 1, axis=0)  # [N, goal_dim]
+        obs, next_obs = self.observations.copy(), self.next_observations.copy()
+        obs[:, goal] = goals
+        next_obs[:, goal] = goals
+        rewards = np.asarray(reward_fn(next_obs[:, achieved], goals), dtype=self.rewards.dtype).reshape(-1)
+        tag = "+hindsight-goals"
+        return dataclasses.replace(
+            self,
+            observations=np.concatenate([self.observations, obs]),
+            actions=np.concatenate([self.actions, self.actions]),
+            rewards=np.concatenate([self.rewards, rewards]),
+            next_observations=np.concatenate([self.next_observations, next_obs]),
+            dones=np.concatenate([self.dones, self.dones]),
+            fingerprint=None if self.fingerprint is None else f"{self.fingerprint}{tag}{seed}",
+        )
+
     def returns_to_go(self, gamma: float) -> np.ndarray:
         """``[N]`` float64 discounted return from each transition to its episode's end, ``sum_k gamma^k r_{t+k}``.
 

@@ -314,6 +314,10 @@ class POLA(OfflineAlgorithm):
         keep their own goal and the env's reward of it (hindsight relabelling, the env's ``compute_reward``;
         default since #23's fourteenth pass, which it lifted on both mazes: docs/results.md);
         ``None``: the data as recorded (the paper). No effect on data without a ``desired_goal``
+    :param hindsight_goals: also train on a copy of every goal segment relabelled with a goal it passes through
+        (:meth:`~sb3_pola.common.datasets.OfflineDataset.with_hindsight_goals`, HER): twice the transitions, each
+        relabelled segment rewarded where it passes its goal and not after, so the critic learns what leaving a goal
+        costs. Default ``False``. No effect on data without a ``desired_goal``
     :param critic_diversity: weight ``eta_ES`` of EDAC's ensemble-similarity term added to the critic loss
         (:func:`ensemble_similarity`): it decorrelates the members' action gradients at the data, so that they
         disagree off it and the minimum over the ensemble (targets) and its top-K (eq. 4) are pessimistic where the
@@ -447,6 +451,7 @@ class POLA(OfflineAlgorithm):
         reward_scale: float = 1.0,
         critic_init_value: float | str | None = "returns",
         goal_switches: str | None = "relabel",
+        hindsight_goals: bool = False,
         critic_diversity: float = 1.0,
         critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
@@ -523,6 +528,7 @@ class POLA(OfflineAlgorithm):
         )
         # read while the base class loads the dataset (_prepare_offline_data), so set before it
         self.goal_switches = goal_switches
+        self.hindsight_goals = hindsight_goals
         super().__init__(
             policy,
             env,
@@ -692,17 +698,26 @@ class POLA(OfflineAlgorithm):
         return ["policy", "actor.optimizer", "critic.optimizer"], []
 
     def _prepare_offline_data(self, data: OfflineDataset) -> OfflineDataset:
-        if self.goal_switches is None or not data.goal_switches().any():
+        switches = self.goal_switches is not None and data.goal_switches().any()
+        hindsight = self.hindsight_goals and data.dict_observation_space is not None
+        if hindsight:
+            hindsight = "desired_goal" in data.dict_observation_space.spaces  # type: ignore[union-attr]
+        if not switches and not hindsight:
             return data
         reward_fn = None
-        if self.goal_switches == "relabel":
+        if self.goal_switches == "relabel" or hindsight:
             env = make_env(data)
             compute_reward = getattr(env.unwrapped, "compute_reward", None)
             env.close()
             if compute_reward is None:
-                raise ValueError(f"goal_switches='relabel' needs an env with compute_reward (GoalEnv); {data.env_id} has none")
+                raise ValueError(f"relabelling goals needs an env with compute_reward (GoalEnv); {data.env_id} has none")
             reward_fn = functools.partial(_goal_reward, compute_reward)
-        return data.with_goal_switches(self.goal_switches, reward_fn)
+        if switches:
+            data = data.with_goal_switches(self.goal_switches, reward_fn if self.goal_switches == "relabel" else None)  # type: ignore[arg-type]
+        if hindsight:
+            assert reward_fn is not None
+            data = data.with_hindsight_goals(reward_fn, seed=0 if self.seed is None else self.seed)
+        return data
 
     # ------------------------------------------------------------------ dynamics model
     def _before_training(self, progress_bar: bool = False) -> None:
