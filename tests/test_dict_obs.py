@@ -219,6 +219,43 @@ def test_goal_switches_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, tmp
         POLA("MlpPolicy", dataset=data, goal_switches="hindsight", **light_kwargs())
 
 
+def test_hindsight_goals_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, tmp_path: pathlib.Path) -> None:
+    """``hindsight_goals``: every goal segment once more, its goal a point it reaches, rewarded by the env's rule."""
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(package_datasets_dir()))
+    data = load_offline_dataset("pointmaze/umaze-v0", cache_dir=tmp_path)
+    achieved, goal = slice(0, 2), slice(2, 4)  # the flattening order: achieved_goal, desired_goal, observation
+    relabelled = POLA("MlpPolicy", dataset=data, **light_kwargs()).offline_data  # goal switches relabelled only
+    assert not POLA("MlpPolicy", dataset=data, **light_kwargs()).hindsight_goals  # off by default
+    model = POLA("MlpPolicy", dataset=data, hindsight_goals=True, **{**light_kwargs(), "seed": 3})
+    both, n = model.offline_data, len(relabelled)
+    assert len(both) == 2 * n and both.fingerprint != relabelled.fingerprint
+    for name in ("observations", "actions", "rewards", "next_observations", "dones"):  # the first half as it was
+        np.testing.assert_array_equal(getattr(both, name)[:n], getattr(relabelled, name)[:n])
+    copy_obs, copy_next = both.observations[n:], both.next_observations[n:]
+    np.testing.assert_array_equal(copy_obs[:, achieved], relabelled.observations[:, achieved])  # only goals change
+    np.testing.assert_array_equal(copy_obs[:, 4:], relabelled.observations[:, 4:])
+    np.testing.assert_array_equal(both.actions[n:], relabelled.actions)
+    np.testing.assert_array_equal(copy_obs[:, goal], copy_next[:, goal])  # one goal a segment, never switched
+    ends = np.flatnonzero(relabelled.episode_ends())
+    np.testing.assert_array_equal(np.flatnonzero(both.episode_ends()[n:]), ends)  # the same segments
+    starts = np.concatenate([[0], ends[:-1] + 1])
+    for start, end in zip(starts[:20], ends[:20], strict=True):
+        segment_goal = copy_obs[start, goal]
+        assert (copy_obs[start : end + 1, goal] == segment_goal).all()
+        # the goal is where the segment is after one of its steps, so that step is rewarded
+        hits = np.all(copy_next[start : end + 1, achieved] == segment_goal, axis=1)
+        assert hits.any() and both.rewards[n + start + np.flatnonzero(hits)].min() == 1.0
+    # the env's rule: 1 within 0.45 of the goal, else 0
+    distance = np.linalg.norm(copy_next[:, achieved] - copy_next[:, goal], axis=1)
+    np.testing.assert_array_equal(both.rewards[n:], (distance <= 0.45).astype(np.float32))
+    assert both.rewards[n:].sum() > 5 * relabelled.rewards.sum()  # a copy lingers near its goal, the data's never
+    other = POLA("MlpPolicy", dataset=data, hindsight_goals=True, **{**light_kwargs(), "seed": 4}).offline_data
+    assert not np.array_equal(other.observations[n:, goal], copy_obs[:, goal])  # the seed draws the steps
+    # no desired_goal, no copy
+    flat = synthetic_dataset(50, 3, 2, seed=0)
+    assert flat.with_hindsight_goals(lambda a, g: np.zeros(len(a))) is flat
+
+
 def test_no_goal_switches_without_a_desired_goal() -> None:
     data = synthetic_dataset(50, 3, 2, seed=0)
     assert not data.goal_switches().any()
