@@ -249,6 +249,19 @@ def test_hindsight_goals_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, t
     distance = np.linalg.norm(copy_next[:, achieved] - copy_next[:, goal], axis=1)
     np.testing.assert_array_equal(both.rewards[n:], (distance <= 0.45).astype(np.float32))
     assert both.rewards[n:].sum() > 5 * relabelled.rewards.sum()  # a copy lingers near its goal, the data's never
+    # the critic trains on both halves, the actor on the data's rows only
+    critic_rows: list[np.ndarray] = []
+    actor_rows: list[np.ndarray] = []
+    critic_loss, actor_loss = model._critic_loss_fn, model._actor_loss_fn
+    model._critic_loss_fn = lambda obs, *a: critic_rows.append(obs.numpy().copy()) or critic_loss(obs, *a)  # type: ignore[method-assign]
+    model._actor_loss_fn = lambda obs, *a: actor_rows.append(obs.numpy().copy()) or actor_loss(obs, *a)  # type: ignore[method-assign]
+    model.learn(20)
+    data_rows = {row.tobytes() for row in both.observations[:n]}
+    copy_rows = {row.tobytes() for row in both.observations[n:]} - data_rows
+    seen_by_actor = [row.tobytes() for batch in actor_rows for row in batch]
+    seen_by_critic = [row.tobytes() for batch in critic_rows for row in batch]
+    assert len(seen_by_actor) == 20 * model.batch_size and all(row in data_rows for row in seen_by_actor)
+    assert sum(row in copy_rows for row in seen_by_critic) > 0.3 * len(seen_by_critic)
     other = POLA("MlpPolicy", dataset=data, hindsight_goals=True, **{**light_kwargs(), "seed": 4}).offline_data
     assert not np.array_equal(other.observations[n:, goal], copy_obs[:, goal])  # the seed draws the steps
     # no desired_goal, no copy

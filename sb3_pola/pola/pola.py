@@ -314,10 +314,11 @@ class POLA(OfflineAlgorithm):
         keep their own goal and the env's reward of it (hindsight relabelling, the env's ``compute_reward``;
         default since #23's fourteenth pass, which it lifted on both mazes: docs/results.md);
         ``None``: the data as recorded (the paper). No effect on data without a ``desired_goal``
-    :param hindsight_goals: also train on a copy of every goal segment relabelled with a goal it passes through
-        (:meth:`~sb3_pola.common.datasets.OfflineDataset.with_hindsight_goals`, HER): twice the transitions, each
-        relabelled segment rewarded where it passes its goal and not after, so the critic learns what leaving a goal
-        costs. Default ``False``. No effect on data without a ``desired_goal``
+    :param hindsight_goals: also train the critic on a copy of every goal segment relabelled with a goal it passes
+        through (:meth:`~sb3_pola.common.datasets.OfflineDataset.with_hindsight_goals`, HER): each relabelled segment
+        is rewarded where it passes its goal and not after, so the critic learns what leaving a goal costs. The actor
+        draws its batches from the data alone: imitating the copies would teach it to pass its goal by.
+        Default ``False``. No effect on data without a ``desired_goal``
     :param critic_diversity: weight ``eta_ES`` of EDAC's ensemble-similarity term added to the critic loss
         (:func:`ensemble_similarity`): it decorrelates the members' action gradients at the data, so that they
         disagree off it and the minimum over the ensemble (targets) and its top-K (eq. 4) are pessimistic where the
@@ -529,6 +530,7 @@ class POLA(OfflineAlgorithm):
         # read while the base class loads the dataset (_prepare_offline_data), so set before it
         self.goal_switches = goal_switches
         self.hindsight_goals = hindsight_goals
+        self._n_imitation_rows: int | None = None  # hindsight_goals: the actor's batches come from the first rows
         super().__init__(
             policy,
             env,
@@ -689,6 +691,7 @@ class POLA(OfflineAlgorithm):
             "_critic_loss_fn",
             "_data_returns",
             "_goal_mask",
+            "_n_imitation_rows",
             "_actor_loss_fn",
             "eta_schedule",
             "critic_lr_schedule",
@@ -716,6 +719,7 @@ class POLA(OfflineAlgorithm):
             data = data.with_goal_switches(self.goal_switches, reward_fn if self.goal_switches == "relabel" else None)  # type: ignore[arg-type]
         if hindsight:
             assert reward_fn is not None
+            self._n_imitation_rows = len(data)  # the copies come after: the critic's rows, not the actor's
             data = data.with_hindsight_goals(reward_fn, seed=0 if self.seed is None else self.seed)
         return data
 
@@ -825,15 +829,24 @@ class POLA(OfflineAlgorithm):
         for _ in range(gradient_steps):
             indices = buffer.sample_indices(batch_size)
             returns = None if self._data_returns is None else self._data_returns[indices]
-            self._accumulate_train_stats(self._update(buffer._get_samples(indices), returns))
+            actor_batch = None
+            if self._n_imitation_rows is not None:  # the hindsight copies train the critic, not the actor
+                actor_indices = th.randint(0, self._n_imitation_rows, (batch_size,), device=self.device)
+                actor_batch = buffer._get_samples(actor_indices)
+            self._accumulate_train_stats(self._update(buffer._get_samples(indices), returns, actor_batch))
             self._n_updates += 1
 
-    def _update(self, batch: ReplayBufferSamples, returns: th.Tensor | None = None) -> dict[str, th.Tensor]:
+    def _update(
+        self, batch: ReplayBufferSamples, returns: th.Tensor | None = None, actor_batch: ReplayBufferSamples | None = None
+    ) -> dict[str, th.Tensor]:
         """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics.
 
         ``returns``: ``[B]`` the data's discounted returns-to-go of the batch's transitions (``target_q_floor="returns"``)
+        ``actor_batch``: the actor's own batch (``hindsight_goals``: rows of the data, not of its relabelled copies);
+        the critic's by default
         """
         obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
+        actor_obs, actor_actions = (obs, actions) if actor_batch is None else (actor_batch.observations, actor_batch.actions)
         rewards, dones = batch.rewards.flatten() * self.reward_scale, batch.dones.flatten()
 
         # critic: TD regression on the pessimistic target (section IV)
@@ -853,7 +866,7 @@ class POLA(OfflineAlgorithm):
             self._eta_value.mul_(maturity)
             critic_stats["critic_maturity"] = maturity
         with self._critic_frozen():
-            actor_loss, actor_stats = self._actor_loss_fn(obs, actions, self._eta_value)
+            actor_loss, actor_stats = self._actor_loss_fn(actor_obs, actor_actions, self._eta_value)
         self.actor.optimizer.zero_grad(set_to_none=True)
         actor_loss.backward()
         actor_grad_norm = self._clip(self.actor.parameters())
@@ -866,7 +879,7 @@ class POLA(OfflineAlgorithm):
             _lerp_params(self.actor.parameters(), self.policy.actor_ema.parameters(), 1.0 - decay)
         _lerp_params(self.critic.parameters(), self.critic_target.parameters(), self.tau)
         if step % GRADIENT_RATIO_FREQ == 0 and not self._behaviour_cloning:
-            self.logger.record_mean("train/q_bc_grad_ratio", self.q_bc_gradient_ratio(obs, actions))
+            self.logger.record_mean("train/q_bc_grad_ratio", self.q_bc_gradient_ratio(actor_obs, actor_actions))
 
         # losses first: a divergence message names the first few non-finite statistics
         return {
