@@ -262,6 +262,8 @@ def test_hindsight_goals_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, t
     seen_by_critic = [row.tobytes() for batch in critic_rows for row in batch]
     assert len(seen_by_actor) == 20 * model.batch_size and all(row in data_rows for row in seen_by_actor)
     assert sum(row in copy_rows for row in seen_by_critic) > 0.3 * len(seen_by_critic)
+    # the dynamics model fits the data's rows: the copies show the same motion under other goals
+    assert len(model._dynamics_arrays()[0]) == n
     other = POLA("MlpPolicy", dataset=data, hindsight_goals=True, **{**light_kwargs(), "seed": 4}).offline_data
     assert not np.array_equal(other.observations[n:, goal], copy_obs[:, goal])  # the seed draws the steps
     # no desired_goal, no copy

@@ -753,18 +753,23 @@ class POLA(OfflineAlgorithm):
         if bool(self.policy.dynamics_fitted):
             dynamics.freeze()  # a loaded model (resume) rebuilt the model with trainable parameters
             return
-        buffer = self._setup_offline_data()
+        arrays = self._dynamics_arrays()
         fit_kwargs = {"progress_bar": progress_bar, "logger": self.logger, "verbose": self.verbose, **self.dynamics_fit_kwargs}
-        fit_kwargs = self._sized_fit_kwargs(fit_kwargs, len(buffer.observations))
+        fit_kwargs = self._sized_fit_kwargs(fit_kwargs, len(arrays[0]))
 
         def fit() -> dict[str, float]:
-            return DynamicsTrainer(dynamics, **fit_kwargs).fit(
-                buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones
-            )
+            return DynamicsTrainer(dynamics, **fit_kwargs).fit(*arrays)
 
         self.dynamics_fit_info = self._fit_or_load_dynamics(fit, fit_kwargs)
         dynamics.freeze()
         self.policy.dynamics_fitted.fill_(True)
+
+    def _dynamics_arrays(self) -> list[th.Tensor]:
+        """The transitions the dynamics model fits: ``s, a, s', r, done`` of the data's rows (the hindsight copies of
+        ``hindsight_goals`` show the same motion under other goals)."""
+        buffer = self._setup_offline_data()
+        n = self._n_imitation_rows or len(buffer.observations)
+        return [x[:n] for x in (buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones)]
 
     def _desired_goal_mask(self) -> th.Tensor | None:
         """``[obs_dim]`` bool, True at the ``desired_goal`` columns of a goal-conditioned dataset's flattened
@@ -799,11 +804,11 @@ class POLA(OfflineAlgorithm):
 
     def _fit_or_load_dynamics(self, fit: Callable[[], dict[str, float]], fit_kwargs: dict[str, Any]) -> dict[str, float]:
         """``fit()``, or its result from the cache of fitted dynamics models (``dynamics_cache``)."""
-        dynamics, buffer, data = self.policy.dynamics, self._setup_offline_data(), self._offline_data
+        arrays = self._dynamics_arrays()
+        dynamics, data = self.policy.dynamics, self._offline_data
         assert dynamics is not None
         if not getattr(self, "dynamics_cache", True):  # models saved before #25 have no such attribute
             return fit()
-        arrays = [buffer.observations, buffer.actions, buffer.next_observations, buffer.rewards, buffer.dones]
         data_key = data_fingerprint(data.fingerprint if data is not None else None, arrays)
         result_kwargs = {k: v for k, v in fit_kwargs.items() if k not in ("progress_bar", "logger", "verbose")}
         exact = self.seed is not None  # seed=None: any fit of this data and configuration will do
