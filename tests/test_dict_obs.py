@@ -203,13 +203,13 @@ def test_goal_switches_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, tmp
     assert terminal.fingerprint != data.fingerprint
     assert terminal.with_goal_switches("terminal").fingerprint == terminal.fingerprint
     assert data.dones.sum() == 0  # the original is left alone
-    model = POLA("MlpPolicy", dataset=data, goal_switches="terminal", **light_kwargs())
+    model = POLA("MlpPolicy", dataset=data, goal_switches="terminal", hindsight_goals=False, **light_kwargs())
     np.testing.assert_array_equal(model.offline_data.dones.astype(bool), switches)
-    as_recorded = POLA("MlpPolicy", dataset=data, goal_switches=None, **light_kwargs()).offline_data
+    as_recorded = POLA("MlpPolicy", dataset=data, goal_switches=None, hindsight_goals=False, **light_kwargs()).offline_data
     assert as_recorded.goal_switches().sum() == switches.sum() and not as_recorded.dones.any()
     # relabelled (the default): the switch keeps its goal, and the env's reward of it says the policy is still there
-    model = POLA("MlpPolicy", dataset=data, **light_kwargs())
-    assert model.goal_switches == "relabel"
+    model = POLA("MlpPolicy", dataset=data, hindsight_goals=False, **light_kwargs())
+    assert POLA("MlpPolicy", dataset=data, **light_kwargs()).goal_switches == "relabel"
     relabelled = model.offline_data
     assert not relabelled.goal_switches().any() and not relabelled.dones.any()
     np.testing.assert_array_equal(relabelled.next_observations[switches, goal], data.observations[switches, goal])
@@ -224,9 +224,10 @@ def test_hindsight_goals_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, t
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(package_datasets_dir()))
     data = load_offline_dataset("pointmaze/umaze-v0", cache_dir=tmp_path)
     achieved, goal = slice(0, 2), slice(2, 4)  # the flattening order: achieved_goal, desired_goal, observation
-    relabelled = POLA("MlpPolicy", dataset=data, **light_kwargs()).offline_data  # goal switches relabelled only
-    assert not POLA("MlpPolicy", dataset=data, **light_kwargs()).hindsight_goals  # off by default
-    model = POLA("MlpPolicy", dataset=data, hindsight_goals=True, **{**light_kwargs(), "seed": 3})
+    # goal switches relabelled only
+    relabelled = POLA("MlpPolicy", dataset=data, hindsight_goals=False, **light_kwargs()).offline_data
+    model = POLA("MlpPolicy", dataset=data, **{**light_kwargs(), "seed": 3})
+    assert model.hindsight_goals  # the default
     both, n = model.offline_data, len(relabelled)
     assert len(both) == 2 * n and both.fingerprint != relabelled.fingerprint
     for name in ("observations", "actions", "rewards", "next_observations", "dones"):  # the first half as it was
@@ -269,6 +270,13 @@ def test_hindsight_goals_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, t
     # no desired_goal, no copy
     flat = synthetic_dataset(50, 3, 2, seed=0)
     assert flat.with_hindsight_goals(lambda a, g: np.zeros(len(a))) is flat
+
+
+def test_hindsight_goals_need_the_envs_reward_of_goals(goal_dataset: str) -> None:
+    """A goal env without ``compute_reward`` cannot relabel: the default says so and trains on the data alone."""
+    with pytest.warns(UserWarning, match="compute_reward"):
+        data = POLA("MlpPolicy", dataset=goal_dataset, **light_kwargs()).offline_data
+    assert len(data) == len(load_offline_dataset(goal_dataset))
 
 
 def test_no_goal_switches_without_a_desired_goal() -> None:
