@@ -14,7 +14,9 @@ mkdir -p "$OUT"
 # 2026-12-02 name those settings, so that they reproduce on today's defaults. Until the seventh pass (2026-12-04) the
 # defaults had no target floor nor critic start, and the main job (`sb3-pola run` without --config) was the paper's
 # form at the light sizes: the lines before it set `"target_q_floor": null, "critic_init_value": null` and
-# `--config light-paper` for that reason (`--config light` was `--config defaults` then)
+# `--config light-paper` for that reason (`--config light` was `--config defaults` then). Since the sixteenth pass
+# (2026-12-05) the defaults add hindsight copies of the mazes' goal segments for the critic: the maze lines before
+# that block reproduce with '"hindsight_goals": false' added to their --kwargs (no effect on the other datasets).
 ACTOR='"prediction_type": "sample", "lr_cos": 0.001, "lookahead_normalization": "weights", "q_scale_floor": "auto", "critic_layer_norm": false'
 # the imitation screen: held-out action MSE
 for d in halfcheetah/medium-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
@@ -478,3 +480,32 @@ for n in GRLRC BCLRC; do for s in 0 3 4 5 6 7; do
 done; done
 "$PY" -m sb3_pola.cli peers --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --algos bc --seeds 3 4 5 6 7 \
   --steps 10000 --eval-freq 10000 --eval-episodes 50 --threads 1 --out "$OUT/more_seeds50"
+
+# 2026-12-05 (sixteenth pass). Levers for the cells that tie BC with the same actor: the Q-ranked rule on the saved
+# models of seeds 3-7 (POLA and BC), EMA actions at the predicted states (LAE); then hindsight copies of the goal
+# segments (option hindsight_goals): first imitated too (HG, BCHG: commit e1e0ca1), then for the critic only (HGC,
+# the new defaults from f7bc3cd; T0HGC without the look-ahead; BCHGC, BC under the new defaults).
+for s in 3 4 5 6 7; do
+  for n in LRC BCLRC; do screen --dataset hopper/medium-v0 --seed "$s" --name "$n" --rules best10; done
+  for n in GRLRC BCLRC; do screen --dataset pointmaze/medium-v0 --seed "$s" --name "$n" --rules best10; done
+  LAE='{"lookahead_actions": "ema", "backprop_through_model": true, "compile_update": true}'
+  screen --dataset hopper/medium-v0 --seed "$s" --name LAE --kwargs "$LAE"
+  screen --dataset pointmaze/medium-v0 --seed "$s" --name GRLAE --kwargs "$LAE"
+done
+# run these two from commit e1e0ca1 (the copies imitated too)
+for s in 3 4; do for d in pointmaze/medium-v0 pointmaze/umaze-v0; do
+  screen --dataset "$d" --seed "$s" --name BCHG \
+    --kwargs '{"hindsight_goals": true, "eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+done; done
+screen --dataset pointmaze/medium-v0 --seed 3 --name HG --kwargs '{"hindsight_goals": true, "compile_update": true}'
+for s in 0 1 2 3 4 5 6 7; do for d in pointmaze/medium-v0 pointmaze/umaze-v0; do
+  screen --dataset "$d" --seed "$s" --name HGC --kwargs '{"hindsight_goals": true, "compile_update": true}'
+  screen --dataset "$d" --seed "$s" --name T0HGC --kwargs '{"hindsight_goals": true, "rollout_length": 0, "compile_update": true}'
+done; done
+for s in 0 1 2; do for d in pointmaze/medium-v0 pointmaze/umaze-v0; do
+  screen --dataset "$d" --seed "$s" --name BCHGC \
+    --kwargs '{"hindsight_goals": true, "eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+done; done
+# where T = 3 trails T = 0, the training statistics of the fifteenth pass's runs
+"$PY" experiments/policy_quality/lookahead_diag.py --out "$OUT" \
+  --runs hopper/medium-v0:LRC:T0LRC pointmaze/medium-v0:GRLRC:T0GRLRC pointmaze/umaze-v0:GRLRC:T0GRLRC
