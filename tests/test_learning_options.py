@@ -36,8 +36,8 @@ def test_eta_schedule_is_followed_during_learn(pendulum_path, tmp_path):
     etas = []
     real_update = model._update
 
-    def spy(batch, returns=None):
-        stats = real_update(batch, returns)
+    def spy(batch, returns=None, actor_batch=None):
+        stats = real_update(batch, returns, actor_batch)
         etas.append(float(stats["eta"]))
         return stats
 
@@ -304,6 +304,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "critic_init_value": None,
         "lookahead_fixed_goal": False,
         "goal_switches": None,
+        "hindsight_goals": False,
     }
     # the Q term at the paper's strength, bounded by LayerNorm critics (#23; #12's weakened form stays an option)
     shared = {"lookahead_normalization", "q_scale_floor"}
