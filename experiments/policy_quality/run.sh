@@ -506,6 +506,13 @@ for s in 0 1 2; do for d in pointmaze/medium-v0 pointmaze/umaze-v0; do
   screen --dataset "$d" --seed "$s" --name BCHGC \
     --kwargs '{"hindsight_goals": true, "eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
 done; done
+# the U-maze's imitation floor: BC under the new defaults with another noise schedule, or without the state products
+BCN='"hindsight_goals": true, "eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true'
+for s in 0 1 2; do
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCCOS --kwargs "{$BCN, \"beta_schedule\": \"cosine\"}"
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCLIN --kwargs "{$BCN, \"beta_schedule\": \"linear\"}"
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCNP --kwargs "{$BCN, \"use_state_products\": false}"
+done
 # where T = 3 trails T = 0, the training statistics of the fifteenth pass's runs
 "$PY" experiments/policy_quality/lookahead_diag.py --out "$OUT" \
   --runs hopper/medium-v0:LRC:T0LRC pointmaze/medium-v0:GRLRC:T0GRLRC pointmaze/umaze-v0:GRLRC:T0GRLRC
