@@ -512,6 +512,7 @@ for s in 0 1 2; do
   screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCCOS --kwargs "{$BCN, \"beta_schedule\": \"cosine\"}"
   screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCLIN --kwargs "{$BCN, \"beta_schedule\": \"linear\"}"
   screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCNP --kwargs "{$BCN, \"use_state_products\": false}"
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --name BCW256 --kwargs "{$BCN, \"policy_kwargs\": {\"net_arch\": [256, 256]}}"
 done
 # where T = 3 trails T = 0, the training statistics of the fifteenth pass's runs
 "$PY" experiments/policy_quality/lookahead_diag.py --out "$OUT" \
