@@ -260,3 +260,19 @@ def test_optimize_two_workers_share_a_study(pendulum: pathlib.Path) -> None:
     # --trial-id loading converts the parameters back into POLA arguments
     params = zoo.convert_pola_params(trials[0].params)
     assert params["top_k"] <= params["n_critics"]
+
+
+def test_hyperparameter_file_has_no_repeated_key() -> None:
+    """YAML loaders keep the last of a repeated key silently: a key written twice in pola.yml is an editing slip."""
+
+    def check(node: yaml.Node, where: str) -> None:
+        if isinstance(node, yaml.MappingNode):
+            keys = [key.value for key, _ in node.value if isinstance(key, yaml.ScalarNode)]
+            assert len(keys) == len(set(keys)), (where, sorted(k for k in keys if keys.count(k) > 1))
+            for key, value in node.value:
+                check(value, f"{where}/{getattr(key, 'value', '?')}")
+        elif isinstance(node, yaml.SequenceNode):
+            for item in node.value:
+                check(item, where)
+
+    check(yaml.compose(CONFIG.read_text()), str(CONFIG.name))

@@ -721,10 +721,10 @@ class POLA(OfflineAlgorithm):
             if self.goal_switches == "relabel" and reward_fn is None:
                 raise ValueError(f"goal_switches='relabel' needs an env with compute_reward (GoalEnv); {data.env_id} has none")
             data = data.with_goal_switches(self.goal_switches, reward_fn)  # type: ignore[arg-type]
-        if hindsight and reward_fn is None:
-            warnings.warn(f"hindsight_goals needs an env with compute_reward (GoalEnv); {data.env_id} has none: no copies")
-        elif hindsight:
-            assert reward_fn is not None
+        if hindsight:
+            if reward_fn is None:
+                warnings.warn(f"hindsight_goals needs an env with compute_reward (GoalEnv); {data.env_id} has none: no copies")
+                return data
             self._n_imitation_rows = len(data)  # the copies come after: the critic's rows, not the actor's
             data = data.with_hindsight_goals(reward_fn, seed=0 if self.seed is None else self.seed)
         return data
