@@ -5,7 +5,9 @@ model under several rules of ``predict`` (10 episodes each, the score protocol's
         --kwargs '{"eta": 0.0, "rollout_length": 0}' [--seed 0] [--rules noisefree,obsnoise,sample,best10]
 
 ``--kwargs`` is JSON of POLA arguments over the preset's sizes; ``"lr_cos": X`` sets ``learning_rate`` to a cosine
-decay from X. The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip`` (``OUT``: ``outputs/policy_quality``); a
+decay from X; ``"policy_kwargs": {"activation_fn": "ReLU"}`` names a ``torch.nn`` activation. ``--raw-states`` trains
+on the states as recorded (the state normalisation set to mean 0, std 1, as d3rlpy's BC sees them; not a package
+option). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip`` (``OUT``: ``outputs/policy_quality``); a
 second call with the same name and seed evaluates the saved model (e.g. under another rule). The dynamics model is
 fitted once per dataset and reused (``dynamics.pt``). One JSON line per run, appended to ``OUT/screen.jsonl``.
 """
@@ -54,10 +56,13 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--rules", default="noisefree,obsnoise,sample,best10")
     parser.add_argument("--out", default="outputs/policy_quality")
+    parser.add_argument("--raw-states", action="store_true", help="no state normalisation (a new model only)")
     args = parser.parse_args()
     th.set_num_threads(1)
     kwargs = pola_kwargs({**CPU, **json.loads(args.kwargs)})  # "lr_cos": X, a cosine decay from X, as the grid
     policy_kwargs = {"net_arch": [128, 128], **kwargs.pop("policy_kwargs", {})}
+    if isinstance(policy_kwargs.get("activation_fn"), str):
+        policy_kwargs["activation_fn"] = getattr(th.nn, policy_kwargs["activation_fn"])
     data = load_offline_dataset(args.dataset)
     folder = pathlib.Path(args.out) / args.dataset.replace("/", "_")
     (folder / args.name).mkdir(parents=True, exist_ok=True)
@@ -67,6 +72,9 @@ def main() -> None:
         model = POLA.load(model_path)
     else:
         model = POLA("MlpPolicy", dataset=data, seed=args.seed, policy_kwargs=policy_kwargs, **kwargs)
+        if args.raw_states:
+            obs_dim = model.policy.observation_space.shape[0]  # type: ignore[index]
+            model.policy.set_normalization(np.zeros(obs_dim), np.ones(obs_dim))
         dynamics = folder / "dynamics.pt"
         shared = kwargs.get("dynamics_kwargs") == CPU["dynamics_kwargs"]
         if model.policy.dynamics is not None and shared and dynamics.exists():
@@ -87,6 +95,9 @@ def main() -> None:
         returns = evaluate(model, env, args.episodes, 10_000 * (args.seed + 1), deterministic, successes)
         score = data.normalized_score(returns)
         row[rule] = round(score if score is not None else float(returns.mean()), 1)
+        if args.episodes > 10:  # the score protocol's 10 episodes are the first 10 resets
+            first = data.normalized_score(returns[:10])
+            row[rule + "_first10"] = round(first if first is not None else float(returns[:10].mean()), 1)
         if successes and successes[0] is not None:
             row[rule + "_success"] = round(float(np.mean([bool(s) for s in successes])), 2)
     print(json.dumps(row), flush=True)
