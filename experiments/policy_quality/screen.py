@@ -7,9 +7,12 @@ model under several rules of ``predict`` (10 episodes each, the score protocol's
 ``--kwargs`` is JSON of POLA arguments over the preset's sizes; ``"lr_cos": X`` sets ``learning_rate`` to a cosine
 decay from X; ``"policy_kwargs": {"activation_fn": "ReLU"}`` names a ``torch.nn`` activation. ``--raw-states`` trains
 on the states as recorded (the state normalisation set to mean 0, std 1, as d3rlpy's BC sees them; not a package
-option). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip`` (``OUT``: ``outputs/policy_quality``); a
-second call with the same name and seed evaluates the saved model (e.g. under another rule). The dynamics model is
-fitted once per dataset and reused (``dynamics.pt``). One JSON line per run, appended to ``OUT/screen.jsonl``.
+option). ``--actor-layer-norm`` / ``--actor-dropout P`` put a LayerNorm after each hidden linear layer of the
+actor / a dropout after each hidden activation (IDQL's actor has both; screens only, not package options; a model
+made so is evaluated when made, and does not load again). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip``
+(``OUT``: ``outputs/policy_quality``); a second call with the same name and seed evaluates the saved model (e.g. under
+another rule). The dynamics model is fitted once per dataset and reused (``dynamics.pt``). One JSON line per run,
+appended to ``OUT/screen.jsonl``; ``--episodes`` above 10 adds the first 10 episodes' score (the protocol's).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset, make_env
 from sb3_pola.common.evaluation import evaluate
 from sb3_pola.grid.variants import pola_kwargs
+from sb3_pola.pola.actor import DiffusionActor
 
 # the cpu preset's sizes (sb3-pola score --preset cpu), eager
 CPU: dict[str, Any] = {
@@ -46,6 +50,26 @@ RULES = {
 }
 
 
+def patch_actor(layer_norm: bool, dropout: float) -> None:
+    """Build every :class:`DiffusionActor` with LayerNorm and/or dropout in its trunk (before the optimizers and
+    the EMA copy are made, so both include them)."""
+    init = DiffusionActor.__init__
+
+    def patched(self: DiffusionActor, *args: Any, **kwargs: Any) -> None:
+        init(self, *args, **kwargs)
+        modules = list(self.trunk)
+        layers: list[th.nn.Module] = [th.nn.LayerNorm(self.input_layer.out_features)] if layer_norm else []
+        for module in modules[:-1]:
+            layers.append(module)
+            if isinstance(module, th.nn.Linear) and layer_norm:
+                layers.append(th.nn.LayerNorm(module.out_features))
+            elif not isinstance(module, th.nn.Linear) and dropout > 0:
+                layers.append(th.nn.Dropout(dropout))
+        self.trunk = th.nn.Sequential(*layers, modules[-1])
+
+    DiffusionActor.__init__ = patched  # type: ignore[method-assign]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--dataset", required=True)
@@ -57,8 +81,12 @@ def main() -> None:
     parser.add_argument("--rules", default="noisefree,obsnoise,sample,best10")
     parser.add_argument("--out", default="outputs/policy_quality")
     parser.add_argument("--raw-states", action="store_true", help="no state normalisation (a new model only)")
+    parser.add_argument("--actor-layer-norm", action="store_true", help="LayerNorm in the actor's trunk (a new model)")
+    parser.add_argument("--actor-dropout", type=float, default=0.0, help="dropout in the actor's trunk (a new model)")
     args = parser.parse_args()
     th.set_num_threads(1)
+    if args.actor_layer_norm or args.actor_dropout > 0:
+        patch_actor(args.actor_layer_norm, args.actor_dropout)
     kwargs = pola_kwargs({**CPU, **json.loads(args.kwargs)})  # "lr_cos": X, a cosine decay from X, as the grid
     policy_kwargs = {"net_arch": [128, 128], **kwargs.pop("policy_kwargs", {})}
     if isinstance(policy_kwargs.get("activation_fn"), str):
