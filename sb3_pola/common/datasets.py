@@ -153,14 +153,13 @@ class OfflineDataset:
         """Bytes held by the transition arrays."""
         return sum(int(getattr(self, name).nbytes) for name in ARRAY_FIELDS)
 
-    def obs_stats(self, eps: float = 1e-3, rows: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def obs_stats(self, eps: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
         """Mean and standard deviation of the observations (float64 accumulation, chunked).
 
         :param eps: floor of the standard deviation (constant features would divide by zero)
-        :param rows: the statistics of the first ``rows`` transitions only (``None``: all)
         :return: ``(mean, std)`` as float32 arrays of shape ``[obs_dim]``
         """
-        obs = self.observations if rows is None else self.observations[:rows]
+        obs = self.observations
         n = max(len(obs), 1)
         total = np.zeros(obs.shape[1:], dtype=np.float64)
         for start in range(0, len(obs), _STATS_CHUNK):

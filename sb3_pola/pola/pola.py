@@ -636,9 +636,7 @@ class POLA(OfflineAlgorithm):
         )
         self.policy = self.policy.to(self.device)
         if self._offline_data is not None:
-            # the data's rows: the hindsight copies are the critic's, and their goals (points the data passes) would
-            # move the goal columns' statistics away from the goals the actor is given (the data's and the env's)
-            mean, std = self._offline_data.obs_stats(rows=self._n_imitation_rows)
+            mean, std = self._offline_data.obs_stats()
             self.policy.set_normalization(mean, std)
         self._create_aliases()
         self._gamma_powers = th.tensor([self.gamma**i for i in range(self.rollout_length + 1)], device=self.device)
