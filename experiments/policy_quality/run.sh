@@ -517,3 +517,43 @@ done
 # where T = 3 trails T = 0, the training statistics of the fifteenth pass's runs
 "$PY" experiments/policy_quality/lookahead_diag.py --out "$OUT" \
   --runs hopper/medium-v0:LRC:T0LRC pointmaze/medium-v0:GRLRC:T0GRLRC pointmaze/umaze-v0:GRLRC:T0GRLRC
+
+# 2026-12-05 (seventeenth pass). The U-maze's imitation floor: BC with the package's actor under the defaults (seeds
+# 0-2) with one change each; the layer-norm, dropout and ReLU lines on 50 episodes (the first 10 are the score's).
+BCD='"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true'
+for s in 0 1 2; do
+  U=(--dataset pointmaze/umaze-v0 --seed "$s" --rules obsnoise)
+  screen "${U[@]}" --name BCK10 --kwargs "{$BCD, \"n_diffusion_steps\": 10}"
+  screen "${U[@]}" --name BCK20 --kwargs "{$BCD, \"n_diffusion_steps\": 20}"
+  screen "${U[@]}" --name BCHGCCOS --kwargs '{"eta": 0.0, "rollout_length": 0, "lr_cos": 0.001, "compile_update": true}'
+  screen "${U[@]}" --name BCNONORM --kwargs "{$BCD}" --raw-states
+  screen "${U[@]}" --name BCRELU --kwargs "{$BCD, \"policy_kwargs\": {\"activation_fn\": \"ReLU\"}}"
+  screen "${U[@]}" --name BCLN --kwargs "{$BCD}" --episodes 50 --actor-layer-norm
+  screen "${U[@]}" --name BCLNDROP --kwargs "{$BCD}" --episodes 50 --actor-layer-norm --actor-dropout 0.1
+  screen "${U[@]}" --name BCDROP --kwargs "{$BCD}" --episodes 50 --actor-dropout 0.1
+done
+screen --dataset pointmaze/umaze-v0 --seed 0 --rules obsnoise --name BCNOCLIP --kwargs "{$BCD, \"max_grad_norm\": null}"
+# the state normalisation over the data's rows only (run from commit f07205f, reverted by 5c0a68e): POLA, T = 0, BC
+for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+  screen --dataset "$d" --seed "$s" --rules obsnoise --episodes 50 --name HGN --kwargs '{"compile_update": true}'
+  screen --dataset "$d" --seed "$s" --rules obsnoise --episodes 50 --name T0HGN --kwargs '{"rollout_length": 0, "compile_update": true}'
+  screen --dataset "$d" --seed "$s" --rules obsnoise --episodes 50 --name BCHGN --kwargs "{$BCD}"
+done; done
+# 50 episodes of the saved models of the defaults (HGC, BCHGC; LRC, BCLRC on hopper) and of d3rlpy's BC, 8 seeds
+# (hopper's BC of seeds 0-2 made here: the fifteenth pass's were the AMD VM's score grid)
+for s in 0 1 2; do screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name BCLRC --kwargs "{$BCD}"; done
+for s in 0 1 2 3 4 5 6 7; do
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0 hopper/medium-v0; do
+    for n in HGC BCHGC LRC BCLRC BCHGCCOS; do
+      m="$OUT/${d//\//_}/$n/seed$s.zip"
+      [ -f "$m" ] || continue
+      mkdir -p "$OUT/eval50/${d//\//_}/$n" && ln -sf "$(realpath "$m")" "$OUT/eval50/${d//\//_}/$n/seed$s.zip"
+      "$PY" experiments/policy_quality/screen.py --out "$OUT/eval50" --dataset "$d" --seed "$s" --name "$n" \
+        --rules obsnoise --episodes 50
+    done
+  done
+done
+"$PY" -m sb3_pola.cli peers --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --algos bc --seeds 0 1 2 \
+  --steps 10000 --eval-freq 10000 --eval-episodes 50 --threads 1 --out "$OUT/more_seeds50"
+"$PY" -m sb3_pola.cli peers --datasets pointmaze/medium-v0 hopper/medium-v0 --algos bc --seeds 0 1 2 3 4 5 6 7 \
+  --steps 10000 --eval-freq 10000 --eval-episodes 50 --threads 1 --out "$OUT/more_seeds50"
