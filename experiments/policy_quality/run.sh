@@ -557,3 +557,15 @@ done
   --steps 10000 --eval-freq 10000 --eval-episodes 50 --threads 1 --out "$OUT/more_seeds50"
 "$PY" -m sb3_pola.cli peers --datasets pointmaze/medium-v0 hopper/medium-v0 --algos bc --seeds 0 1 2 3 4 5 6 7 \
   --steps 10000 --eval-freq 10000 --eval-episodes 50 --threads 1 --out "$OUT/more_seeds50"
+# the actor's cosine decay with the critics' constant rate (LRS, the fourteenth pass's split) under today's defaults,
+# and BC with the package's actor under the decay on hopper (BCCOS)
+for s in 0 1 2 3 4 5 6 7; do
+  screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name LRSHG \
+    --kwargs '{"lr_cos": 0.001, "critic_learning_rate": 0.001, "compile_update": true}'
+  screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name BCCOS \
+    --kwargs '{"eta": 0.0, "rollout_length": 0, "lr_cos": 0.001, "compile_update": true}'
+done
+for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+  screen --dataset "$d" --seed "$s" --rules obsnoise --name LRSHG \
+    --kwargs '{"lr_cos": 0.001, "critic_learning_rate": 0.001, "compile_update": true}'
+done; done
