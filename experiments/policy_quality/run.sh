@@ -569,3 +569,7 @@ for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
   screen --dataset "$d" --seed "$s" --rules obsnoise --name LRSHG \
     --kwargs '{"lr_cos": 0.001, "critic_learning_rate": 0.001, "compile_update": true}'
 done; done
+for s in 0 1 2; do
+  screen --dataset pointmaze/medium-v0 --seed "$s" --rules obsnoise --name BCCOSHG \
+    --kwargs '{"eta": 0.0, "rollout_length": 0, "lr_cos": 0.001, "compile_update": true}'
+done
