@@ -540,8 +540,11 @@ for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
   screen --dataset "$d" --seed "$s" --rules obsnoise --episodes 50 --name BCHGN --kwargs "{$BCD}"
 done; done
 # 50 episodes of the saved models of the defaults (HGC, BCHGC; LRC, BCLRC on hopper) and of d3rlpy's BC, 8 seeds
-# (hopper's BC of seeds 0-2 made here: the fifteenth pass's were the AMD VM's score grid)
-for s in 0 1 2; do screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name BCLRC --kwargs "{$BCD}"; done
+# (hopper's BC and POLA of seeds 0-2 made here: the fifteenth pass's were the AMD VM's score grid)
+for s in 0 1 2; do
+  screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name BCLRC --kwargs "{$BCD}"
+  screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name LRC --kwargs '{"learning_rate": 0.001, "compile_update": true}'
+done
 for s in 0 1 2 3 4 5 6 7; do
   for d in pointmaze/umaze-v0 pointmaze/medium-v0 hopper/medium-v0; do
     for n in HGC BCHGC LRC BCLRC BCHGCCOS; do
