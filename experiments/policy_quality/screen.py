@@ -9,7 +9,7 @@ decay from X; ``"policy_kwargs": {"activation_fn": "ReLU"}`` names a ``torch.nn`
 on the states as recorded (the state normalisation set to mean 0, std 1, as d3rlpy's BC sees them; not a package
 option). ``--actor-layer-norm`` / ``--actor-dropout P`` put a LayerNorm after each hidden linear layer of the
 actor / a dropout after each hidden activation (IDQL's actor has both; screens only, not package options; a model
-made so is evaluated when made, and does not load again). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip``
+made so loads again only with the same flags). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip``
 (``OUT``: ``outputs/policy_quality``); a second call with the same name and seed evaluates the saved model (e.g. under
 another rule). The dynamics model is fitted once per dataset and reused (``dynamics.pt``). One JSON line per run,
 appended to ``OUT/screen.jsonl``; ``--episodes`` above 10 adds the first 10 episodes' score (the protocol's).
