@@ -84,9 +84,10 @@ class OfflineReplayBuffer(BaseBuffer):
         """
         return self._get_samples(self.sample_indices(batch_size))
 
-    def sample_indices(self, batch_size: int) -> th.Tensor:
-        """``[B]`` uniform transition indices (with replacement), the draw :meth:`sample` makes."""
-        return th.randint(0, self.buffer_size, (batch_size,), device=self.device)
+    def sample_indices(self, batch_size: int, n_rows: int | None = None) -> th.Tensor:
+        """``[B]`` uniform transition indices (with replacement), the draw :meth:`sample` makes; ``n_rows``: from the
+        first ``n_rows`` transitions only."""
+        return th.randint(0, self.buffer_size if n_rows is None else n_rows, (batch_size,), device=self.device)
 
     def _get_samples(  # type: ignore[override]
         self, batch_inds: np.ndarray | th.Tensor, env: VecNormalize | None = None

@@ -766,7 +766,7 @@ class POLA(OfflineAlgorithm):
         def fit() -> dict[str, float]:
             return DynamicsTrainer(dynamics, **fit_kwargs).fit(*arrays)
 
-        self.dynamics_fit_info = self._fit_or_load_dynamics(fit, fit_kwargs)
+        self.dynamics_fit_info = self._fit_or_load_dynamics(fit, fit_kwargs, arrays)
         dynamics.freeze()
         self.policy.dynamics_fitted.fill_(True)
 
@@ -808,9 +808,11 @@ class POLA(OfflineAlgorithm):
             fit_kwargs["max_steps"] = auto_max_steps(n_transitions, **sizes)
         return fit_kwargs
 
-    def _fit_or_load_dynamics(self, fit: Callable[[], dict[str, float]], fit_kwargs: dict[str, Any]) -> dict[str, float]:
-        """``fit()``, or its result from the cache of fitted dynamics models (``dynamics_cache``)."""
-        arrays = self._dynamics_arrays()
+    def _fit_or_load_dynamics(
+        self, fit: Callable[[], dict[str, float]], fit_kwargs: dict[str, Any], arrays: list[th.Tensor]
+    ) -> dict[str, float]:
+        """``fit()`` on ``arrays`` (:meth:`_dynamics_arrays`), or its result from the cache of fitted dynamics models
+        (``dynamics_cache``)."""
         dynamics, data = self.policy.dynamics, self._offline_data
         assert dynamics is not None
         if not getattr(self, "dynamics_cache", True):  # models saved before #25 have no such attribute
@@ -842,22 +844,25 @@ class POLA(OfflineAlgorithm):
             returns = None if self._data_returns is None else self._data_returns[indices]
             actor_batch = None
             if self._n_imitation_rows is not None:  # the hindsight copies train the critic, not the actor
-                actor_indices = th.randint(0, self._n_imitation_rows, (batch_size,), device=self.device)
-                actor_batch = buffer._get_samples(actor_indices)
+                actor_indices = buffer.sample_indices(batch_size, self._n_imitation_rows)
+                actor_batch = (buffer.observations[actor_indices], buffer.actions[actor_indices])
             self._accumulate_train_stats(self._update(buffer._get_samples(indices), returns, actor_batch))
             self._n_updates += 1
 
     def _update(
-        self, batch: ReplayBufferSamples, returns: th.Tensor | None = None, actor_batch: ReplayBufferSamples | None = None
+        self,
+        batch: ReplayBufferSamples,
+        returns: th.Tensor | None = None,
+        actor_batch: tuple[th.Tensor, th.Tensor] | None = None,
     ) -> dict[str, th.Tensor]:
         """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics.
 
         ``returns``: ``[B]`` the data's discounted returns-to-go of the batch's transitions (``target_q_floor="returns"``)
-        ``actor_batch``: the actor's own batch (``hindsight_goals``: rows of the data, not of its relabelled copies);
-        the critic's by default
+        ``actor_batch``: the actor's own ``(observations, actions)`` (``hindsight_goals``: rows of the data, not of its
+        relabelled copies); the critic's by default
         """
         obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
-        actor_obs, actor_actions = (obs, actions) if actor_batch is None else (actor_batch.observations, actor_batch.actions)
+        actor_obs, actor_actions = (obs, actions) if actor_batch is None else actor_batch
         rewards, dones = batch.rewards.flatten() * self.reward_scale, batch.dones.flatten()
 
         # critic: TD regression on the pessimistic target (section IV)
