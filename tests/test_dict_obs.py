@@ -253,9 +253,9 @@ def test_hindsight_goals_of_the_shipped_umaze(monkeypatch: pytest.MonkeyPatch, t
     # the critic trains on both halves, the actor on the data's rows only
     critic_rows: list[np.ndarray] = []
     actor_rows: list[np.ndarray] = []
-    critic_loss, actor_loss = model._critic_loss_fn, model._actor_loss_fn
+    critic_loss, actor_loss = model._critic_loss_fn, model._bc_loss_fn
     model._critic_loss_fn = lambda obs, *a: critic_rows.append(obs.numpy().copy()) or critic_loss(obs, *a)  # type: ignore[method-assign]
-    model._actor_loss_fn = lambda obs, *a: actor_rows.append(obs.numpy().copy()) or actor_loss(obs, *a)  # type: ignore[method-assign]
+    model._bc_loss_fn = lambda obs, *a: actor_rows.append(obs.numpy().copy()) or actor_loss(obs, *a)  # type: ignore[method-assign]
     model.learn(20)
     data_rows = {row.tobytes() for row in both.observations[:n]}
     copy_rows = {row.tobytes() for row in both.observations[n:]} - data_rows

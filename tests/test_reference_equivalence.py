@@ -402,9 +402,9 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diver
     assert graphs[0] > 0 and graphs[-1] == graphs[0], "the compiled losses were recompiled after the first step"
     for got, want in zip(compiled.policy.parameters(), eager.policy.parameters(), strict=True):
         _close(got, want)
-    assert compiled._actor_loss_fn.compiled_ok
+    assert compiled._bc_loss_fn.compiled_ok and compiled._q_term_fn.compiled_ok
     assert compiled._critic_loss_fn.compiled_ok  # with the similarity term too, in its written-out form
-    assert eager._critic_loss_fn.compiled is None and eager._actor_loss_fn.compiled is None
+    assert eager._critic_loss_fn.compiled is None and eager._bc_loss_fn.compiled is None
 
 
 def test_compile_update_falls_back_to_eager(monkeypatch):

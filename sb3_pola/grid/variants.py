@@ -218,11 +218,13 @@ def pola_kwargs(extra: dict[str, Any]) -> dict[str, Any]:
     """POLA keyword arguments from JSON-able ones: ``"eta_warmup": [warmup, ramp]`` becomes a
     :class:`~sb3_pola.common.schedules.WarmupSchedule` of ``eta`` (behaviour cloning, then a linear ramp);
     ``"lr_cos": X`` a cosine decay of ``learning_rate`` from X to 0 (the default before #23's thirteenth pass),
-    ``"lr_cos": [X, final, start]`` one from X to ``final`` that begins after the ``start`` fraction of training."""
+    ``"lr_cos": [X, final, start]`` one from X to ``final`` that begins after the ``start`` fraction of training;
+    ``"bc_lr_cos"`` the same for ``bc_learning_rate``."""
     kwargs = dict(extra)
-    if "lr_cos" in kwargs:
-        lr_cos = kwargs.pop("lr_cos")
-        kwargs["learning_rate"] = cosine_schedule(*map(float, lr_cos if isinstance(lr_cos, list) else [lr_cos]))
+    for key, name in (("lr_cos", "learning_rate"), ("bc_lr_cos", "bc_learning_rate")):
+        if key in kwargs:
+            value = kwargs.pop(key)
+            kwargs[name] = cosine_schedule(*map(float, value if isinstance(value, list) else [value]))
     if "eta_warmup" in kwargs:
         warmup, ramp = kwargs.pop("eta_warmup")
         eta = float(kwargs.get("eta", pola_defaults(["eta"])["eta"]))

@@ -28,6 +28,7 @@ from sb3_pola.common.dynamics_trainer import DynamicsTrainer, auto_max_steps, ch
 from sb3_pola.common.errors import HyperparameterError
 from sb3_pola.common.input_gradients import explicit_input_gradients, input_gradient_fn
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
+from sb3_pola.common.term_rates import check_term_rate_optimizer, term_rate_step
 from sb3_pola.common.termination import TerminationFn, get_termination_fn
 from sb3_pola.common.validation import check_choice, check_float, check_float_or_schedule, check_int
 from sb3_pola.pola.export import export_policy
@@ -122,6 +123,7 @@ def check_pola_arguments(
     lookahead_target: str,
     lookahead_actions: str,
     critic_learning_rate: float | Schedule | None,
+    bc_learning_rate: float | Schedule | None,
     backprop_through_model: bool,
     model_td_weight: float,
     model_conservatism: float,
@@ -182,6 +184,8 @@ def check_pola_arguments(
     check_choice("lookahead_actions", lookahead_actions, LOOKAHEAD_ACTIONS)
     if critic_learning_rate is not None:
         check_float_or_schedule("critic_learning_rate", critic_learning_rate, low=0.0, low_open=True)
+    if bc_learning_rate is not None:
+        check_float_or_schedule("bc_learning_rate", bc_learning_rate, low=0.0, low_open=True)
     if lookahead_actions == "ema" and not backprop_through_model:
         raise HyperparameterError(
             "lookahead_actions='ema' trains the actor through the model only; it needs backprop_through_model=True"
@@ -400,6 +404,11 @@ class POLA(OfflineAlgorithm):
     :param use_state_products: give the actor the pairwise state products (section V)
     :param critic_learning_rate: the critics' own learning rate, a float or a schedule, as d3rlpy's
         ``critic_learning_rate`` (``None``, the default: ``learning_rate``, as SB3)
+    :param bc_learning_rate: the behaviour-cloning term's own rate in the actor's step, a float or a schedule
+        (``None``, the default: ``learning_rate``). The actor's Adam keeps one second moment for the summed gradient
+        of ``L_d + eta L_q`` (eq. 6) and moves ``L_d``'s part at this rate, ``eta L_q``'s at ``learning_rate``
+        (:mod:`~sb3_pola.common.term_rates`), so a decaying imitation step can leave the Q term's step alone; with
+        ``eta = 0`` it is the actor's rate. It needs the actor's optimizer to be Adam or AdamW
     :param max_grad_norm: gradient-norm clipping of actor and critic (``None`` disables it)
     :param ema_decay: decay of the EMA actor used for targets and ``predict``
     :param ema_update_freq: gradient steps between EMA updates
@@ -476,6 +485,7 @@ class POLA(OfflineAlgorithm):
         prediction_type: str = "sample",
         use_state_products: bool = True,
         critic_learning_rate: float | Schedule | None = None,
+        bc_learning_rate: float | Schedule | None = None,
         max_grad_norm: float | None = 1.0,
         ema_decay: float = 0.995,
         ema_update_freq: int = 5,
@@ -518,6 +528,7 @@ class POLA(OfflineAlgorithm):
             lookahead_target=lookahead_target,
             lookahead_actions=lookahead_actions,
             critic_learning_rate=critic_learning_rate,
+            bc_learning_rate=bc_learning_rate,
             backprop_through_model=backprop_through_model,
             model_td_weight=model_td_weight,
             model_conservatism=model_conservatism,
@@ -594,6 +605,7 @@ class POLA(OfflineAlgorithm):
         self.use_state_products = use_state_products
         self.max_grad_norm = max_grad_norm
         self.critic_learning_rate = critic_learning_rate
+        self.bc_learning_rate = bc_learning_rate
         self.ema_decay = ema_decay
         self.ema_update_freq = ema_update_freq
         self.ema_start = ema_start
@@ -615,6 +627,10 @@ class POLA(OfflineAlgorithm):
         self.critic_lr_schedule: Schedule | None = None
         if self.critic_learning_rate is not None:  # the critics' own rate (the actor keeps learning_rate)
             self.critic_lr_schedule = FloatSchedule(self.critic_learning_rate)
+        # models saved before the argument have none: the actor's one rate
+        bc_learning_rate = getattr(self, "bc_learning_rate", None)
+        self.bc_lr_schedule = None if bc_learning_rate is None else FloatSchedule(bc_learning_rate)
+        self._bc_lr: float | None = None if self.bc_lr_schedule is None else float(self.bc_lr_schedule(1.0))
         self.eta_schedule = FloatSchedule(self.eta)
         self.set_random_seed(self.seed)
         self._termination_fn: TerminationFn | None = get_termination_fn(self.env_id)
@@ -664,7 +680,12 @@ class POLA(OfflineAlgorithm):
             self.critic_diversity == 0 or self._input_gradients is explicit_input_gradients
         )
         self._critic_loss_fn = CompiledLoss(self._critic_loss, compile_critic, self._cudagraphs, starts_step=True)
-        self._actor_loss_fn = CompiledLoss(self._actor_loss, self.compile_update, self._cudagraphs)
+        # eq. 6's two terms, each its own graph and backward pass: the BC term's gradient on its own is what
+        # bc_learning_rate moves at its rate
+        self._bc_loss_fn = CompiledLoss(self._bc_loss, self.compile_update, self._cudagraphs)
+        self._q_term_fn = CompiledLoss(self._q_term, self.compile_update, self._cudagraphs)
+        if self.bc_lr_schedule is not None:
+            check_term_rate_optimizer(self.actor.optimizer)
 
     @property
     def _cudagraphs(self) -> bool:
@@ -696,9 +717,12 @@ class POLA(OfflineAlgorithm):
             "_data_returns",
             "_goal_mask",
             "_n_imitation_rows",
-            "_actor_loss_fn",
+            "_bc_loss_fn",
+            "_q_term_fn",
+            "_bc_lr",
             "eta_schedule",
             "critic_lr_schedule",
+            "bc_lr_schedule",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -838,6 +862,9 @@ class POLA(OfflineAlgorithm):
             critic_lr = self.critic_lr_schedule(self._current_progress_remaining)
             self.logger.record("train/critic_learning_rate", critic_lr)
             update_learning_rate(self.critic.optimizer, critic_lr)
+        if self.bc_lr_schedule is not None:
+            self._bc_lr = float(self.bc_lr_schedule(self._current_progress_remaining))
+            self.logger.record("train/bc_learning_rate", self._bc_lr)
         buffer = self._setup_offline_data()
         for _ in range(gradient_steps):
             indices = buffer.sample_indices(batch_size)
@@ -881,12 +908,29 @@ class POLA(OfflineAlgorithm):
             maturity = ((critic_stats["q_mean"] - self.data_value_floor) / (self.eta_gate_fraction * span)).clamp(0, 1)
             self._eta_value.mul_(maturity)
             critic_stats["critic_maturity"] = maturity
-        with self._critic_frozen():
-            actor_loss, actor_stats = self._actor_loss_fn(actor_obs, actor_actions, self._eta_value)
         self.actor.optimizer.zero_grad(set_to_none=True)
-        actor_loss.backward()
+        bc_loss, actor_stats = self._bc_loss_fn(actor_obs, actor_actions)
+        bc_loss.backward()
+        actor_params = [p for group in self.actor.optimizer.param_groups for p in group["params"]]
+        bc_grads = None
+        if self._bc_lr is not None:  # L_d's gradient alone, before eta L_q's is added to it
+            bc_grads = [None if p.grad is None else p.grad.clone() for p in actor_params]
+        actor_loss = bc_loss.detach()
+        if not self._behaviour_cloning:
+            with self._critic_frozen():
+                q_term, q_stats = self._q_term_fn(actor_obs, self._eta_value)
+            q_term.backward()
+            actor_loss = actor_loss + q_term.detach()
+            actor_stats.update(q_stats)
         actor_grad_norm = self._clip(self.actor.parameters())
         self.actor.optimizer.step()
+        if bc_grads is not None:
+            assert self._bc_lr is not None
+            if self.max_grad_norm is not None:  # the summed gradient's clipping, on its L_d part too
+                scale = (self.max_grad_norm / (actor_grad_norm + 1e-6)).clamp(max=1.0)
+                th._foreach_mul_([g for g in bc_grads if g is not None], scale)
+            term_rate_step(self.actor.optimizer, bc_grads, self._bc_lr)
+        actor_stats.update(actor_loss=actor_loss, eta=self._eta_value.clone())
 
         # EMA actor (Diffusion-QL: copies the actor until ema_start, then averages every ema_update_freq steps)
         step = self._n_updates + 1
@@ -1014,24 +1058,15 @@ class POLA(OfflineAlgorithm):
         """``eta`` is the constant 0: no Q term to build."""
         return not callable(self.eta) and float(self.eta) == 0.0
 
-    def _actor_loss(self, obs: th.Tensor, actions: th.Tensor, eta: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
-        """``L_d + eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor)."""
-        features = self.policy.actor_features(obs)
-        bc_loss = self.actor.loss(actions, features)
-        stats: dict[str, th.Tensor] = {}
-        if not self._behaviour_cloning:
-            q_loss, stats = self._lookahead_q_loss(obs, features)
-            actor_loss = bc_loss + eta * q_loss
-        else:
-            q_loss = th.zeros((), device=obs.device)
-            actor_loss = bc_loss
-        return actor_loss, {
-            "actor_loss": actor_loss.detach(),
-            "bc_loss": bc_loss.detach(),
-            "q_loss": q_loss.detach(),
-            "eta": eta.detach(),
-            **stats,
-        }
+    def _bc_loss(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """``L_d`` of eq. 6: the diffusion actor's imitation loss at the data's actions."""
+        bc_loss = self.actor.loss(actions, self.policy.actor_features(obs))
+        return bc_loss, {"bc_loss": bc_loss.detach(), "q_loss": th.zeros((), device=obs.device)}
+
+    def _q_term(self, obs: th.Tensor, eta: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """``eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor)."""
+        q_loss, stats = self._lookahead_q_loss(obs, self.policy.actor_features(obs))
+        return eta * q_loss, {"q_loss": q_loss.detach(), **stats}
 
     def _model_step(self, state: th.Tensor, action: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]:
         """One step of the dynamics model as the look-ahead takes it: ``s'``, the reward in the critic's units, whether
