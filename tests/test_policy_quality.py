@@ -485,6 +485,49 @@ def test_critic_learning_rate_is_the_critics_own_and_survives_save(tmp_path):
         model_on_dataset(data, **light(critic_learning_rate=0.0))
 
 
+def test_bc_learning_rate_moves_the_imitation_term_at_its_own_rate(tmp_path):
+    """#23: ``bc_learning_rate`` is L_d's rate in the actor's Adam: with eta = 0 the actor's rate; equal to
+    ``learning_rate``, the one-rate step to the bit; else a step of its own (sb3_pola.common.term_rates)."""
+    from sb3_pola.common.schedules import cosine_schedule
+    from sb3_pola.common.term_rates import TERM_MOMENT
+
+    data = synthetic_dataset(200, 3, 2)
+
+    def actor_after(n_steps: int = 4, **kwargs) -> list[th.Tensor]:
+        model = model_on_dataset(data, **light(**kwargs))
+        model._current_progress_remaining = 0.5
+        model.train(n_steps, batch_size=32)
+        return [p.detach().clone() for p in model.actor.parameters()]
+
+    def same(a: list[th.Tensor], b: list[th.Tensor]) -> bool:
+        return all(th.equal(x, y) for x, y in zip(a, b, strict=True))
+
+    # behaviour cloning: the BC rate is the actor's rate (the critic's rate held apart, so the draws match)
+    bc = {"eta": 0.0, "rollout_length": 0, "critic_learning_rate": 1e-3}
+    split = actor_after(bc_learning_rate=cosine_schedule(1e-3), learning_rate=1e-3, **bc)
+    for got, want in zip(split, actor_after(learning_rate=cosine_schedule(1e-3), **bc), strict=True):
+        th.testing.assert_close(got, want)
+    assert not same(split, actor_after(learning_rate=1e-3, **bc))
+    # with the Q term: equal rates are the one-rate step; a decayed BC rate moves the actor elsewhere
+    one_rate = actor_after(learning_rate=1e-3)
+    assert same(actor_after(learning_rate=1e-3, bc_learning_rate=1e-3), one_rate)
+    decayed = actor_after(learning_rate=1e-3, bc_learning_rate=cosine_schedule(1e-3))
+    assert not same(decayed, one_rate)
+    assert not same(decayed, actor_after(learning_rate=cosine_schedule(1e-3), critic_learning_rate=1e-3))
+    # the rate and the term's moment survive save and load
+    model = model_on_dataset(data, **light(bc_learning_rate=cosine_schedule(1e-3)))
+    model.train(2, batch_size=32)
+    assert model._bc_lr == pytest.approx(1e-3)
+    model.save(tmp_path / "m.zip")
+    loaded = type(model).load(tmp_path / "m.zip", dataset=data)
+    assert loaded.bc_lr_schedule is not None and loaded.bc_lr_schedule(0.5) == pytest.approx(5e-4)
+    assert all(TERM_MOMENT in state for state in loaded.actor.optimizer.state.values())
+    with pytest.raises(ValueError, match="bc_learning_rate"):
+        model_on_dataset(data, **light(bc_learning_rate=0.0))
+    with pytest.raises(ValueError, match="Adam"):
+        model_on_dataset(data, **light(bc_learning_rate=1e-4, policy_kwargs={"optimizer_class": th.optim.SGD}))
+
+
 # ---------------------------------------------------------------- the dynamics fit
 def test_default_dynamics_fit_beats_the_plain_nll_on_the_shipped_data():
     from sb3_pola.common.datasets import load_offline_dataset

@@ -215,6 +215,8 @@ def test_cosine_learning_rate_from_json() -> None:
     assert "learning_rate" not in grid_variants.pola_kwargs({"eta": 2.0})  # the package default: 1e-3, constant
     late = grid_variants.pola_kwargs({"lr_cos": [1e-3, 1e-4, 0.5]})["learning_rate"]
     assert (late.initial, late.final, late.start) == (1e-3, 1e-4, 0.5) and late(0.6) == pytest.approx(1e-3)
+    bc = grid_variants.pola_kwargs({"bc_lr_cos": 1e-3})  # the imitation term's own rate
+    assert isinstance(bc["bc_learning_rate"], CosineSchedule) and "learning_rate" not in bc and "bc_lr_cos" not in bc
 
 
 def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
