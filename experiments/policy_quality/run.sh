@@ -576,3 +576,10 @@ for s in 0 1 2; do
   screen --dataset pointmaze/medium-v0 --seed "$s" --rules obsnoise --name BCCOSHG \
     --kwargs '{"eta": 0.0, "rollout_length": 0, "lr_cos": 0.001, "compile_update": true}'
 done
+
+# 2026-12-05 (eighteenth pass). The behaviour-cloning term at its own rate (new option bc_learning_rate, commit
+# eab14e2 or later; '"bc_lr_cos": X' a cosine decay of it from X): the imitation term decayed, the Q term at the
+# constant 1e-3 (TRC). BC with the package's actor under it is BC under the actor's cosine (BCHGCCOS, BCCOS).
+for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+  screen --dataset "$d" --seed "$s" --rules obsnoise --name TRC --kwargs '{"bc_lr_cos": 0.001, "compile_update": true}'
+done; done
