@@ -583,3 +583,15 @@ done
 for s in 0 1 2; do for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
   screen --dataset "$d" --seed "$s" --rules obsnoise --name TRC --kwargs '{"bc_lr_cos": 0.001, "compile_update": true}'
 done; done
+for s in 0 1; do
+  screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name TRC --kwargs '{"bc_lr_cos": 0.001, "compile_update": true}'
+done
+# the imitation term decayed to 3e-4 only (TRF; hopper seed 0 only) and BC under that rate (BCTRF)
+for s in 0 1 2; do
+  screen --dataset pointmaze/medium-v0 --seed "$s" --rules obsnoise --name TRF --kwargs '{"bc_lr_cos": [0.001, 0.0003], "compile_update": true}'
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name BCTRF \
+      --kwargs '{"eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "bc_lr_cos": [0.001, 0.0003], "compile_update": true}'
+  done
+done
+screen --dataset hopper/medium-v0 --seed 0 --rules obsnoise --name TRF --kwargs '{"bc_lr_cos": [0.001, 0.0003], "compile_update": true}'
