@@ -595,3 +595,14 @@ for s in 0 1 2; do
   done
 done
 screen --dataset hopper/medium-v0 --seed 0 --rules obsnoise --name TRF --kwargs '{"bc_lr_cos": [0.001, 0.0003], "compile_update": true}'
+# T = 3 (the defaults, LRC) and T = 0 (T0LRC) over seeds 3-7 on the three locomotion datasets that had 3 seeds (the
+# first run of each dataset, seed 0, fits the shared dynamics model again: its rows are named LRCR / T0LRCR, and the
+# thirteenth pass's seeds 0-2 stay the table's). 8-seed tables: more_seeds.py --names LRC T0LRC --seeds 0 1 2 3 4 5 6 7
+for d in halfcheetah/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-replay-v0; do
+  screen --dataset "$d" --seed 0 --rules obsnoise --name LRCR --kwargs '{"learning_rate": 0.001, "compile_update": true}'
+done
+screen --dataset halfcheetah/medium-v0 --seed 0 --rules obsnoise --name T0LRCR --kwargs '{"rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+for s in 3 4 5 6 7; do for d in hopper/medium-replay-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+  screen --dataset "$d" --seed "$s" --rules obsnoise --name LRC --kwargs '{"learning_rate": 0.001, "compile_update": true}'
+  screen --dataset "$d" --seed "$s" --rules obsnoise --name T0LRC --kwargs '{"rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
+done; done
