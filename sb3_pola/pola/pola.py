@@ -911,10 +911,10 @@ class POLA(OfflineAlgorithm):
         self.actor.optimizer.zero_grad(set_to_none=True)
         bc_loss, actor_stats = self._bc_loss_fn(actor_obs, actor_actions)
         bc_loss.backward()
-        actor_params = [p for group in self.actor.optimizer.param_groups for p in group["params"]]
         bc_grads = None
         if self._bc_lr is not None:  # L_d's gradient alone, before eta L_q's is added to it
-            bc_grads = [None if p.grad is None else p.grad.clone() for p in actor_params]
+            params = [p for group in self.actor.optimizer.param_groups for p in group["params"]]
+            bc_grads = [None if p.grad is None else p.grad.clone() for p in params]
         actor_loss = bc_loss.detach()
         if not self._behaviour_cloning:
             with self._critic_frozen():
