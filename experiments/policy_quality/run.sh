@@ -606,3 +606,8 @@ for s in 3 4 5 6 7; do for d in hopper/medium-replay-v0 halfcheetah/medium-v0 ha
   screen --dataset "$d" --seed "$s" --rules obsnoise --name LRC --kwargs '{"learning_rate": 0.001, "compile_update": true}'
   screen --dataset "$d" --seed "$s" --rules obsnoise --name T0LRC --kwargs '{"rollout_length": 0, "learning_rate": 0.001, "compile_update": true}'
 done; done
+# the defaults on hopper/medium over 30,000 steps (seeds 0, 1): does the fall carry TRC's drift (train/bc_loss,
+# train/action_saturation in $OUT/hopper_medium-v0/D30K/seed<S>/progress.csv)?
+for s in 0 1; do
+  screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name D30K --kwargs '{"compile_update": true}'
+done
