@@ -916,7 +916,9 @@ class POLA(OfflineAlgorithm):
             params = [p for group in self.actor.optimizer.param_groups for p in group["params"]]
             bc_grads = [None if p.grad is None else p.grad.clone() for p in params]
         actor_loss = bc_loss.detach()
-        if not self._behaviour_cloning:
+        if self._behaviour_cloning:
+            actor_stats["q_loss"] = th.zeros_like(actor_loss)
+        else:
             with self._critic_frozen():
                 q_term, q_stats = self._q_term_fn(actor_obs, self._eta_value)
             q_term.backward()
@@ -1061,7 +1063,7 @@ class POLA(OfflineAlgorithm):
     def _bc_loss(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """``L_d`` of eq. 6: the diffusion actor's imitation loss at the data's actions."""
         bc_loss = self.actor.loss(actions, self.policy.actor_features(obs))
-        return bc_loss, {"bc_loss": bc_loss.detach(), "q_loss": th.zeros((), device=obs.device)}
+        return bc_loss, {"bc_loss": bc_loss.detach()}
 
     def _q_term(self, obs: th.Tensor, eta: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """``eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor)."""
