@@ -5,11 +5,15 @@ model under several rules of ``predict`` (10 episodes each, the score protocol's
         --kwargs '{"eta": 0.0, "rollout_length": 0}' [--seed 0] [--rules noisefree,obsnoise,sample,best10]
 
 ``--kwargs`` is JSON of POLA arguments over the preset's sizes; ``"lr_cos": X`` sets ``learning_rate`` to a cosine
-decay from X; ``"policy_kwargs": {"activation_fn": "ReLU"}`` names a ``torch.nn`` activation. ``--raw-states`` trains
-on the states as recorded (the state normalisation set to mean 0, std 1, as d3rlpy's BC sees them; not a package
-option). ``--actor-layer-norm`` / ``--actor-dropout P`` put a LayerNorm after each hidden linear layer of the
-actor / a dropout after each hidden activation (IDQL's actor has both; screens only, not package options; a model
-made so loads again only with the same flags). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip``
+decay from X; ``"policy_kwargs": {"activation_fn": "ReLU"}`` names a ``torch.nn`` activation and
+``"optimizer_class": "AdamW"`` a ``torch.optim`` optimizer (actor and critics). ``--raw-states`` trains on the
+states as recorded (the state normalisation set to mean 0, std 1, as d3rlpy's BC sees them; not a package option).
+``--actor-layer-norm`` / ``--actor-dropout P`` put a LayerNorm after each hidden linear layer of the actor / a
+dropout after each hidden activation (IDQL's actor has both; screens only, not package options; a model made so
+loads again only with the same flags). ``--actor-weight-decay WD`` trains the actor alone with
+``torch.optim.AdamW(weight_decay=WD)`` (the critics keep Adam). ``--goal-relative`` appends ``(desired_goal -
+achieved_goal) / std(desired_goal)`` to the normalised state of goal-conditioned data before the products, in every
+network (screens only; loads again only with the flag). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip``
 (``OUT``: ``outputs/policy_quality``); a second call with the same name and seed evaluates the saved model (e.g. under
 another rule). The dynamics model is fitted once per dataset and reused (``dynamics.pt``). One JSON line per run,
 appended to ``OUT/screen.jsonl``; ``--episodes`` above 10 adds the first 10 episodes' score (the protocol's).
@@ -29,9 +33,12 @@ from stable_baselines3.common.logger import configure
 
 from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset, make_env
+from sb3_pola.common.dict_obs import key_slice
 from sb3_pola.common.evaluation import evaluate
+from sb3_pola.common.torch_layers import BaseFeaturesExtractor, StateProductsExtractor
 from sb3_pola.grid.variants import pola_kwargs
 from sb3_pola.pola.actor import DiffusionActor
+from sb3_pola.pola.policies import POLAPolicy
 
 # the cpu preset's sizes (sb3-pola score --preset cpu), eager
 CPU: dict[str, Any] = {
@@ -70,6 +77,45 @@ def patch_actor(layer_norm: bool, dropout: float) -> None:
     DiffusionActor.__init__ = patched  # type: ignore[method-assign]
 
 
+def patch_actor_weight_decay(weight_decay: float) -> None:
+    """The actor's optimizer becomes ``AdamW(weight_decay=...)`` at the policy's learning rate; the critics' stays."""
+    init = POLAPolicy.__init__
+
+    def patched(self: POLAPolicy, *args: Any, **kwargs: Any) -> None:
+        init(self, *args, **kwargs)
+        lr = self.actor.optimizer.param_groups[0]["lr"]
+        self.actor.optimizer = th.optim.AdamW(self.actor.parameters(), lr=lr, weight_decay=weight_decay)
+
+    POLAPolicy.__init__ = patched  # type: ignore[method-assign]
+
+
+def patch_goal_relative(achieved: slice, desired: slice) -> None:
+    """Every :class:`StateProductsExtractor` appends ``(desired - achieved) / std(desired)`` (of the raw flat
+    observation) to the normalised state before its products."""
+
+    def init(self: StateProductsExtractor, observation_space: Any, use_state_products: bool = True) -> None:
+        n = int(np.prod(observation_space.shape))
+        m = n + (desired.stop - desired.start)
+        BaseFeaturesExtractor.__init__(self, observation_space, m + m * (m - 1) // 2 if use_state_products else m)
+        self.use_state_products = use_state_products
+        self.register_buffer("obs_mean", th.zeros(n))
+        self.register_buffer("obs_std", th.ones(n))
+        i, j = th.triu_indices(m, m, offset=1)
+        self.register_buffer("idx_i", i, persistent=False)
+        self.register_buffer("idx_j", j, persistent=False)
+
+    def forward(self: StateProductsExtractor, observations: th.Tensor) -> th.Tensor:
+        raw = observations.flatten(1).float()
+        relative = (raw[:, desired] - raw[:, achieved]) / self.obs_std[desired]
+        x = th.cat(((raw - self.obs_mean) / self.obs_std, relative), dim=-1)
+        if not self.use_state_products:
+            return x
+        return th.cat((x, x[:, self.idx_i] * x[:, self.idx_j]), dim=-1)
+
+    StateProductsExtractor.__init__ = init  # type: ignore[method-assign]
+    StateProductsExtractor.forward = forward  # type: ignore[method-assign]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--dataset", required=True)
@@ -83,15 +129,25 @@ def main() -> None:
     parser.add_argument("--raw-states", action="store_true", help="no state normalisation (a new model only)")
     parser.add_argument("--actor-layer-norm", action="store_true", help="LayerNorm in the actor's trunk (a new model)")
     parser.add_argument("--actor-dropout", type=float, default=0.0, help="dropout in the actor's trunk (a new model)")
+    parser.add_argument("--actor-weight-decay", type=float, default=0.0, help="the actor's AdamW decay (a new model)")
+    parser.add_argument("--goal-relative", action="store_true", help="desired - achieved goal as inputs (mazes)")
     args = parser.parse_args()
     th.set_num_threads(1)
     if args.actor_layer_norm or args.actor_dropout > 0:
         patch_actor(args.actor_layer_norm, args.actor_dropout)
+    if args.actor_weight_decay > 0:
+        patch_actor_weight_decay(args.actor_weight_decay)
     kwargs = pola_kwargs({**CPU, **json.loads(args.kwargs)})  # "lr_cos": X, a cosine decay from X, as the grid
     policy_kwargs = {"net_arch": [128, 128], **kwargs.pop("policy_kwargs", {})}
     if isinstance(policy_kwargs.get("activation_fn"), str):
         policy_kwargs["activation_fn"] = getattr(th.nn, policy_kwargs["activation_fn"])
+    if isinstance(policy_kwargs.get("optimizer_class"), str):
+        policy_kwargs["optimizer_class"] = getattr(th.optim, policy_kwargs["optimizer_class"])
     data = load_offline_dataset(args.dataset)
+    if args.goal_relative:
+        space = data.dict_observation_space
+        assert space is not None, "--goal-relative needs goal-conditioned data"
+        patch_goal_relative(key_slice(space, "achieved_goal"), key_slice(space, "desired_goal"))
     folder = pathlib.Path(args.out) / args.dataset.replace("/", "_")
     (folder / args.name).mkdir(parents=True, exist_ok=True)
     model_path = folder / args.name / f"seed{args.seed}.zip"
