@@ -611,3 +611,40 @@ done; done
 for s in 0 1; do
   screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name D30K --kwargs '{"compile_update": true}'
 done
+
+# 2026-12-05 (nineteenth pass). The U-maze's imitation floor: goal-relative inputs, weight decay of the actor; the
+# defaults' hopper fall at 30k against T = 0 and the EMA look-ahead. BCREL and AWD01 ran through the flags' first
+# form (patch scripts with the same code; af0cc41's flags train the same weights, checked at 200 steps); BCREL ran
+# eagerly. First, the saved BC models of the sixteenth pass under a sampling temperature:
+"$PY" experiments/policy_quality/temperature.py --dataset pointmaze/umaze-v0 --taus 1 0.5 0.25 0 \
+  --models "$OUT"/pointmaze_umaze-v0/BCHGC/seed0.zip "$OUT"/pointmaze_umaze-v0/BCHGC/seed1.zip "$OUT"/pointmaze_umaze-v0/BCHGC/seed2.zip
+BCN='"hindsight_goals": true, "eta": 0.0, "rollout_length": 0, "learning_rate": 0.001, "compile_update": true'
+for s in 0 1 2; do
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --rules obsnoise --name BCREL --kwargs "{$BCN}" --goal-relative
+  for wd in 0.01:BCWD001 0.1:BCWD01 0.3:BCWD03 1.0:BCWD1; do
+    screen --dataset pointmaze/umaze-v0 --seed "$s" --rules obsnoise --name "${wd#*:}" \
+      --kwargs "{$BCN, \"policy_kwargs\": {\"optimizer_class\": \"AdamW\", \"optimizer_kwargs\": {\"weight_decay\": ${wd%%:*}}}}"
+  done
+  for d in pointmaze/medium-v0 hopper/medium-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name BCWD01 \
+      --kwargs "{$BCN, \"policy_kwargs\": {\"optimizer_class\": \"AdamW\", \"optimizer_kwargs\": {\"weight_decay\": 0.1}}}"
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name BCAWD03 --kwargs "{$BCN}" --actor-weight-decay 0.3
+  done
+done
+# the actor's weight decay alone (the critics keep Adam): with eta = 0 the same actor as BCWD01 (seed 0: 72.1 both)
+for s in 0 3 4 5 6 7; do
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --rules obsnoise --name BCAWD01 --kwargs "{$BCN}" --actor-weight-decay 0.1
+done
+# POLA with the actor's weight decay 0.1 (stopped after four runs)
+for d in pointmaze/medium-v0 hopper/medium-v0 pointmaze/umaze-v0; do
+  screen --dataset "$d" --seed 0 --rules obsnoise --name AWD01 --kwargs '{"compile_update": true}' --actor-weight-decay 0.1
+done
+screen --dataset pointmaze/medium-v0 --seed 1 --rules obsnoise --name AWD01 --kwargs '{"compile_update": true}' --actor-weight-decay 0.1
+# hopper/medium over 30,000 steps (seeds 0, 1), beside the eighteenth pass's D30K: T = 0, and the EMA acting at the
+# predicted states with the gradient through the model (the twelfth pass's one-seed hint at the paper's weights)
+for s in 0 1; do
+  screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name T0D30K \
+    --kwargs '{"rollout_length": 0, "compile_update": true}'
+  screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name EMAD30K \
+    --kwargs '{"lookahead_actions": "ema", "backprop_through_model": true, "compile_update": true}'
+done
