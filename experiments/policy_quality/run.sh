@@ -648,3 +648,16 @@ for s in 0 1; do
   screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name EMAD30K \
     --kwargs '{"lookahead_actions": "ema", "backprop_through_model": true, "compile_update": true}'
 done
+# the Q term's weight and the critic's pessimism at T = 0, and T = 3 at eta 1 (seed 2 of T0K1D30K and E1D30K not run)
+for s in 0 1 2; do
+  screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name T0E1D30K \
+    --kwargs '{"rollout_length": 0, "eta": 1.0, "compile_update": true}'
+done
+screen --dataset hopper/medium-v0 --seed 0 --steps 30000 --rules obsnoise --name T0K1D30K \
+  --kwargs '{"rollout_length": 0, "top_k": 1, "compile_update": true}'
+for s in 0 1; do
+  screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name E1D30K --kwargs '{"eta": 1.0, "compile_update": true}'
+done
+# T = 0 (the CPU preset's T0 variant, today's defaults) over 100,000 steps at the constant rate, one OUT per seed,
+# merged into experiments/long100k/lrc/t0_scores.csv
+for s in 0 1 2; do OUT=outputs/long100k_t0lrc_s$s VARIANTS=T0 bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
