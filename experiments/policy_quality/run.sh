@@ -653,8 +653,10 @@ for s in 0 1 2; do
   screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name T0E1D30K \
     --kwargs '{"rollout_length": 0, "eta": 1.0, "compile_update": true}'
 done
-screen --dataset hopper/medium-v0 --seed 0 --steps 30000 --rules obsnoise --name T0K1D30K \
-  --kwargs '{"rollout_length": 0, "top_k": 1, "compile_update": true}'
+for s in 0 1; do
+  screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name T0K1D30K \
+    --kwargs '{"rollout_length": 0, "top_k": 1, "compile_update": true}'
+done
 for s in 0 1; do
   screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name E1D30K --kwargs '{"eta": 1.0, "compile_update": true}'
 done
