@@ -663,5 +663,5 @@ done
 # T = 0 (the CPU preset's T0 variant, today's defaults) over 100,000 steps at the constant rate, one OUT per seed,
 # merged into experiments/long100k/lrc/t0_scores.csv
 for s in 0 1 2; do OUT=outputs/long100k_t0lrc_s$s VARIANTS=T0 bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
-# T = 0 at eta 1 over 100,000 steps at the constant rate (seed 0; experiments/long100k/lrc/t0_eta1_scores.csv)
-OUT=outputs/long100k_t0e1 VARIANTS=T0 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh 0 hopper/medium-v0
+# T = 0 at eta 1 over 100,000 steps at the constant rate (seeds 0, 1; experiments/long100k/lrc/t0_eta1_scores.csv)
+for s in 0 1; do OUT=outputs/long100k_t0e1_s$s VARIANTS=T0 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
