@@ -27,6 +27,7 @@ import pathlib
 import time
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3.common.logger import configure
@@ -35,7 +36,7 @@ from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset, make_env
 from sb3_pola.common.dict_obs import key_slice
 from sb3_pola.common.evaluation import evaluate
-from sb3_pola.common.torch_layers import BaseFeaturesExtractor, StateProductsExtractor
+from sb3_pola.common.torch_layers import StateProductsExtractor
 from sb3_pola.grid.variants import pola_kwargs
 from sb3_pola.pola.actor import DiffusionActor
 from sb3_pola.pola.policies import POLAPolicy
@@ -93,16 +94,16 @@ def patch_goal_relative(achieved: slice, desired: slice) -> None:
     """Every :class:`StateProductsExtractor` appends ``(desired - achieved) / std(desired)`` (of the raw flat
     observation) to the normalised state before its products."""
 
+    init_widened = StateProductsExtractor.__init__
+
     def init(self: StateProductsExtractor, observation_space: Any, use_state_products: bool = True) -> None:
+        # the products' indices and feature size of the widened input; the normalisation keeps the raw width
         n = int(np.prod(observation_space.shape))
-        m = n + (desired.stop - desired.start)
-        BaseFeaturesExtractor.__init__(self, observation_space, m + m * (m - 1) // 2 if use_state_products else m)
-        self.use_state_products = use_state_products
-        self.register_buffer("obs_mean", th.zeros(n))
-        self.register_buffer("obs_std", th.ones(n))
-        i, j = th.triu_indices(m, m, offset=1)
-        self.register_buffer("idx_i", i, persistent=False)
-        self.register_buffer("idx_j", j, persistent=False)
+        widened = gym.spaces.Box(-np.inf, np.inf, (n + desired.stop - desired.start,), np.float32)
+        init_widened(self, widened, use_state_products)
+        self._observation_space = observation_space
+        self.obs_mean = th.zeros(n)
+        self.obs_std = th.ones(n)
 
     def forward(self: StateProductsExtractor, observations: th.Tensor) -> th.Tensor:
         raw = observations.flatten(1).float()
