@@ -665,3 +665,12 @@ done
 for s in 0 1 2; do OUT=outputs/long100k_t0lrc_s$s VARIANTS=T0 bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
 # T = 0 at eta 1 over 100,000 steps at the constant rate (seeds 0, 1; experiments/long100k/lrc/t0_eta1_scores.csv)
 for s in 0 1; do OUT=outputs/long100k_t0e1_s$s VARIANTS=T0 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
+
+# --- twentieth pass (stop 47): eta 1 under today's defaults, 10,000 steps on the six datasets, and T = 3 at eta 1 over
+# 100,000 steps on hopper/medium (experiments/long100k/lrc/t3_eta1_scores.csv)
+for s in 0 1 2; do
+  for d in pointmaze/medium-v0 pointmaze/umaze-v0 hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name ETA1 --kwargs '{"compile_update": true, "eta": 1.0}'
+  done
+done
+for s in 0 1 2; do OUT=outputs/long100k_t3e1_s$s VARIANTS=T3 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
