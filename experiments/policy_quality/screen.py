@@ -13,7 +13,8 @@ dropout after each hidden activation (IDQL's actor has both; screens only, not p
 loads again only with the same flags). ``--actor-weight-decay WD`` trains the actor alone with
 ``torch.optim.AdamW(weight_decay=WD)`` (the critics keep Adam). ``--goal-relative`` appends ``(desired_goal -
 achieved_goal) / std(desired_goal)`` to the normalised state of goal-conditioned data before the products, in every
-network (screens only; loads again only with the flag). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip``
+network (screens only; loads again only with the flag). ``--eta-after FRACTION ETA`` trains at the kwargs' ``eta``
+until that fraction of ``--steps``, then at ``ETA`` (a step in the Q term's weight; screens only). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip``
 (``OUT``: ``outputs/policy_quality``); a second call with the same name and seed evaluates the saved model (e.g. under
 another rule). The dynamics model is fitted once per dataset and reused (``dynamics.pt``). One JSON line per run,
 appended to ``OUT/screen.jsonl``; ``--episodes`` above 10 adds the first 10 episodes' score (the protocol's).
@@ -37,7 +38,7 @@ from sb3_pola.common.datasets import load_offline_dataset, make_env
 from sb3_pola.common.dict_obs import key_slice
 from sb3_pola.common.evaluation import evaluate
 from sb3_pola.common.torch_layers import StateProductsExtractor
-from sb3_pola.grid.variants import pola_kwargs
+from sb3_pola.grid.variants import pola_defaults, pola_kwargs
 from sb3_pola.pola.actor import DiffusionActor
 from sb3_pola.pola.policies import POLAPolicy
 
@@ -117,6 +118,15 @@ def patch_goal_relative(achieved: slice, desired: slice) -> None:
     StateProductsExtractor.forward = forward  # type: ignore[method-assign]
 
 
+def eta_step(before: float, fraction: float, after: float) -> Any:
+    """An SB3 schedule of ``eta``: ``before`` until ``fraction`` of training is done, ``after`` from then on."""
+
+    def schedule(progress_remaining: float) -> float:
+        return before if 1.0 - progress_remaining < fraction else after
+
+    return schedule
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--dataset", required=True)
@@ -132,6 +142,7 @@ def main() -> None:
     parser.add_argument("--actor-dropout", type=float, default=0.0, help="dropout in the actor's trunk (a new model)")
     parser.add_argument("--actor-weight-decay", type=float, default=0.0, help="the actor's AdamW decay (a new model)")
     parser.add_argument("--goal-relative", action="store_true", help="desired - achieved goal as inputs (mazes)")
+    parser.add_argument("--eta-after", nargs=2, type=float, metavar=("FRACTION", "ETA"), help="eta's value after")
     args = parser.parse_args()
     th.set_num_threads(1)
     if args.actor_layer_norm or args.actor_dropout > 0:
@@ -139,6 +150,8 @@ def main() -> None:
     if args.actor_weight_decay > 0:
         patch_actor_weight_decay(args.actor_weight_decay)
     kwargs = pola_kwargs({**CPU, **json.loads(args.kwargs)})  # "lr_cos": X, a cosine decay from X, as the grid
+    if args.eta_after:
+        kwargs["eta"] = eta_step(float(kwargs.get("eta", pola_defaults(["eta"])["eta"])), *args.eta_after)
     policy_kwargs = {"net_arch": [128, 128], **kwargs.pop("policy_kwargs", {})}
     if isinstance(policy_kwargs.get("activation_fn"), str):
         policy_kwargs["activation_fn"] = getattr(th.nn, policy_kwargs["activation_fn"])
