@@ -14,10 +14,11 @@ loads again only with the same flags). ``--actor-weight-decay WD`` trains the ac
 ``torch.optim.AdamW(weight_decay=WD)`` (the critics keep Adam). ``--goal-relative`` appends ``(desired_goal -
 achieved_goal) / std(desired_goal)`` to the normalised state of goal-conditioned data before the products, in every
 network (screens only; loads again only with the flag). ``--eta-after FRACTION ETA`` trains at the kwargs' ``eta``
-until that fraction of ``--steps``, then at ``ETA`` (a step in the Q term's weight; screens only). The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip``
-(``OUT``: ``outputs/policy_quality``); a second call with the same name and seed evaluates the saved model (e.g. under
-another rule). The dynamics model is fitted once per dataset and reused (``dynamics.pt``). One JSON line per run,
-appended to ``OUT/screen.jsonl``; ``--episodes`` above 10 adds the first 10 episodes' score (the protocol's).
+until that fraction of ``--steps``, then at ``ETA`` (a step in the Q term's weight; screens only). The model is
+saved in ``OUT/<dataset>/<name>/seed<S>.zip`` (``OUT``: ``outputs/policy_quality``); a second call with the same
+name and seed evaluates the saved model (e.g. under another rule). The dynamics model is fitted once per dataset and
+reused (``dynamics.pt``). One JSON line per run, appended to ``OUT/screen.jsonl``; ``--episodes`` above 10 adds the
+first 10 episodes' score (the protocol's).
 """
 
 from __future__ import annotations
