@@ -680,3 +680,5 @@ for s in 0 1; do
     --eta-after 0.3333333 1.0
 done
 for s in 2; do OUT=outputs/long100k_t0e1_s$s VARIANTS=T0 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
+# halfcheetah/medium-replay at eta 1 over 100,000 steps (seed 0; rows appended to experiments/long100k/lrc/t3_eta1_scores.csv)
+OUT=outputs/long100k_t3e1hc_s0 VARIANTS=T3 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh 0 halfcheetah/medium-replay-v0
