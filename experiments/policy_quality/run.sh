@@ -676,6 +676,8 @@ done
 for s in 0 1 2; do OUT=outputs/long100k_t3e1_s$s VARIANTS=T3 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
 # eta 3.94 for the first 10,000 steps, then 1 (a step), T = 3, 30,000 steps on hopper/medium, seeds 0, 1
 for s in 0 1; do
+  screen --dataset halfcheetah/medium-replay-v0 --seed "$s" --steps 30000 --rules obsnoise --name SWD30K --kwargs '{"compile_update": true}' \
+    --eta-after 0.3333333 1.0
   screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name SWD30K --kwargs '{"compile_update": true}' \
     --eta-after 0.3333333 1.0
 done
