@@ -10,7 +10,6 @@ Reads the score grid's CSVs in ``experiments/long100k/`` (``lrc/scores.csv`` the
 from __future__ import annotations
 
 import argparse
-import csv
 import pathlib
 from collections import defaultdict
 
@@ -19,6 +18,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+from sb3_pola.grid.rows import read_rows
 
 HERE = pathlib.Path(__file__).parent
 DATASET = "hopper/medium-v0"
@@ -36,9 +37,9 @@ CURVES = [
 def curve(path: pathlib.Path, variant: str) -> tuple[list[int], np.ndarray, np.ndarray, int]:
     """Steps, mean and std over seeds, number of seeds of one variant's evaluations."""
     by_step: dict[int, list[float]] = defaultdict(list)
-    for row in csv.DictReader(path.open()):
+    for row in read_rows(path):
         if row["dataset"] == DATASET and row["variant"] == variant:
-            by_step[int(row["step"])].append(float(row["score"]))
+            by_step[row["step"]].append(row["score"])
     steps = sorted(by_step)
     values = [by_step[s] for s in steps]
     return steps, np.array([np.mean(v) for v in values]), np.array([np.std(v) for v in values]), max(map(len, values))
