@@ -82,15 +82,19 @@ class DiffusionActor(nn.Module):
         # [B, A + time + F] -> [B, A]
         return self.trunk(self.input_layer(th.cat((x_t, self.time_mlp(t), features), dim=-1)))
 
-    def loss(self, actions: th.Tensor, features: th.Tensor) -> th.Tensor:
+    def loss(self, actions: th.Tensor, features: th.Tensor, weights: th.Tensor | None = None) -> th.Tensor:
         """Behaviour-cloning loss ``L_d`` (eq. 6): noise-prediction MSE at a uniformly drawn step (or the clean
-        action's MSE under ``prediction_type="sample"``)."""
+        action's MSE under ``prediction_type="sample"``). ``weights``: ``[B]`` per-row weights of the mean (the
+        advantage weights of ``POLA(bc_weight_temp=...)``); ``None``: the plain mean."""
         t = th.randint(0, self.n_diffusion_steps, (actions.shape[0],), device=actions.device)
         noise = th.randn_like(actions)
         x_t = self.schedule.add_noise(actions, noise, t)
         # eq. 6: || eps - eps_theta(sqrt(abar_t) a + sqrt(1 - abar_t) eps, s_new, t) ||^2 (a in place of eps for x0)
         target = actions if self.prediction_type == "sample" else noise
-        return F.mse_loss(self.predict_noise(x_t, t, features), target)
+        if weights is None:
+            return F.mse_loss(self.predict_noise(x_t, t, features), target)
+        per_row = (self.predict_noise(x_t, t, features) - target).pow(2).mean(dim=-1)  # [B]
+        return (weights * per_row).mean()
 
     def sample(
         self,

@@ -81,6 +81,15 @@ def pessimistic_q(q: th.Tensor, top_k: int, lcb_coef: float | None = None) -> th
     return q.mean(dim=0) - lcb_coef * q.std(dim=0)
 
 
+def advantage_weights(advantages: th.Tensor, temperature: th.Tensor | float, max_weight: float) -> th.Tensor:
+    """``[B]`` weights of the imitation term over a batch's ``[B]`` advantages ``Q(s, a) - Q(s, pi(s))``: AWR's
+    ``exp(temperature A)`` with ``A`` in units of the batch's standard deviation (scale-free: the same temperature on
+    dense and sparse rewards), normalised to mean 1 over the batch (``B softmax``) so that ``L_d`` keeps its scale
+    against ``L_q``, then clipped at ``max_weight``. Temperature 0: all 1 (plain behaviour cloning)."""
+    scaled = advantages / advantages.std().clamp_min(1e-6)
+    return (advantages.shape[0] * th.softmax(temperature * scaled, dim=0)).clamp(max=max_weight)
+
+
 def _q_scale(q_top_k: th.Tensor, q_scale_floor: float) -> th.Tensor:
     """Scale-free Q term (Diffusion-QL): the detached mean ``|Q|`` at the current states, no lower than the floor."""
     return q_top_k[0].abs().mean().detach().clamp_min(max(q_scale_floor, 1e-6))

@@ -34,9 +34,11 @@ from sb3_pola.common.validation import check_choice, check_float, check_float_or
 from sb3_pola.pola.export import export_policy
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
 from sb3_pola.pola.losses import (
+    advantage_weights,
     ensemble_similarity,
     lookahead_q_objective,
     lookahead_weights,
+    pessimistic_q,
     value_expansion_objective,
     value_lower_bound,
 )
@@ -124,6 +126,8 @@ def check_pola_arguments(
     lookahead_actions: str,
     critic_learning_rate: float | Schedule | None,
     bc_learning_rate: float | Schedule | None,
+    bc_weight_temp: float | None,
+    bc_max_weight: float,
     backprop_through_model: bool,
     model_td_weight: float,
     model_conservatism: float,
@@ -186,6 +190,8 @@ def check_pola_arguments(
         check_float_or_schedule("critic_learning_rate", critic_learning_rate, low=0.0, low_open=True)
     if bc_learning_rate is not None:
         check_float_or_schedule("bc_learning_rate", bc_learning_rate, low=0.0, low_open=True)
+    check_float("bc_weight_temp", bc_weight_temp, low=0.0, optional=True)
+    check_float("bc_max_weight", bc_max_weight, low=0.0, low_open=True)
     if lookahead_actions == "ema" and not backprop_through_model:
         raise HyperparameterError(
             "lookahead_actions='ema' trains the actor through the model only; it needs backprop_through_model=True"
@@ -409,6 +415,15 @@ class POLA(OfflineAlgorithm):
         of ``L_d + eta L_q`` (eq. 6) and moves ``L_d``'s part at this rate, ``eta L_q``'s at ``learning_rate``
         (:mod:`~sb3_pola.common.term_rates`), so a decaying imitation step can leave the Q term's step alone; with
         ``eta = 0`` it is the actor's rate. It needs the actor's optimizer to be Adam or AdamW
+    :param bc_weight_temp: temperature ``beta`` of advantage-weighted imitation (AWR, as IQL's and AWAC's actors):
+        each row of ``L_d`` (eq. 6) is weighted by ``exp(beta A)``, ``A = Q(s, a) - Q(s, a_ema)`` the pessimistic
+        critic's advantage of the data's action over the EMA actor's (top-K as in eq. 4), in units of the batch's
+        standard deviation, the weights normalised to mean 1 over the batch
+        (:func:`~sb3_pola.pola.losses.advantage_weights`). The imitation target moves towards the data's better
+        actions without querying the critic off the data, which ``L_q`` does. With ``eta_gate`` the temperature opens
+        with ``eta`` (``beta`` times the critic's maturity). ``None`` (default): the plain mean (the paper); ``0``: the
+        same weights, all 1. Costs one more chain of the EMA actor and one critic call a step
+    :param bc_max_weight: upper clip of the advantage weights (relative to their mean of 1). Default ``20``
     :param max_grad_norm: gradient-norm clipping of actor and critic (``None`` disables it)
     :param ema_decay: decay of the EMA actor used for targets and ``predict``
     :param ema_update_freq: gradient steps between EMA updates
@@ -486,6 +501,8 @@ class POLA(OfflineAlgorithm):
         use_state_products: bool = True,
         critic_learning_rate: float | Schedule | None = None,
         bc_learning_rate: float | Schedule | None = None,
+        bc_weight_temp: float | None = None,
+        bc_max_weight: float = 20.0,
         max_grad_norm: float | None = 1.0,
         ema_decay: float = 0.995,
         ema_update_freq: int = 5,
@@ -529,6 +546,8 @@ class POLA(OfflineAlgorithm):
             lookahead_actions=lookahead_actions,
             critic_learning_rate=critic_learning_rate,
             bc_learning_rate=bc_learning_rate,
+            bc_weight_temp=bc_weight_temp,
+            bc_max_weight=bc_max_weight,
             backprop_through_model=backprop_through_model,
             model_td_weight=model_td_weight,
             model_conservatism=model_conservatism,
@@ -606,6 +625,8 @@ class POLA(OfflineAlgorithm):
         self.max_grad_norm = max_grad_norm
         self.critic_learning_rate = critic_learning_rate
         self.bc_learning_rate = bc_learning_rate
+        self.bc_weight_temp = bc_weight_temp
+        self.bc_max_weight = bc_max_weight
         self.ema_decay = ema_decay
         self.ema_update_freq = ema_update_freq
         self.ema_start = ema_start
@@ -661,6 +682,7 @@ class POLA(OfflineAlgorithm):
             [1.0] + [float(self.lookahead_weight)] * self.rollout_length, device=self.device
         )
         self._eta_value = th.zeros((), device=self.device)  # this step's eta, a tensor so a compiled graph reads it
+        self._bc_temp_value = th.zeros((), device=self.device)  # this step's bc_weight_temp, likewise
         # eq. 5's chain in its fast forms (sb3_pola.pola.fast_sampling, tested equal to DiffusionActor.sample): the
         # actor's samples need gradients; the target's do not, but a compiled graph traces the differentiable
         # form (the no-grad one rebuilds its weights in Python each call)
@@ -902,14 +924,19 @@ class POLA(OfflineAlgorithm):
         # actor: L_d + eta L_q (eq. 6, eq. 4), the critic fixed
         self._eta_value.fill_(float(self.eta_schedule(self._current_progress_remaining)))
         span = (self.data_value or 0.0) - self.data_value_floor  # the data's values from the lowest to the mean
+        maturity: th.Tensor | None = None
         if self.eta_gate == "critic_maturity" and span > 0:
             # the Q term opens as the critic's Q at the data rises from the data's lowest return-to-go towards the mean:
             # below that floor Q is the ensemble minimum's pessimism bias, not a value (sparse rewards, early training)
             maturity = ((critic_stats["q_mean"] - self.data_value_floor) / (self.eta_gate_fraction * span)).clamp(0, 1)
             self._eta_value.mul_(maturity)
             critic_stats["critic_maturity"] = maturity
+        if self.bc_weight_temp is not None:  # the advantage weights sharpen as the Q term opens
+            self._bc_temp_value.fill_(float(self.bc_weight_temp))
+            if maturity is not None:
+                self._bc_temp_value.mul_(maturity)
         self.actor.optimizer.zero_grad(set_to_none=True)
-        bc_loss, actor_stats = self._bc_loss_fn(actor_obs, actor_actions)
+        bc_loss, actor_stats = self._bc_loss_fn(actor_obs, actor_actions, self._bc_temp_value)
         bc_loss.backward()
         bc_grads = None
         if self._bc_lr is not None:  # L_d's gradient alone, before eta L_q's is added to it
@@ -1060,10 +1087,21 @@ class POLA(OfflineAlgorithm):
         """``eta`` is the constant 0: no Q term to build."""
         return not callable(self.eta) and float(self.eta) == 0.0
 
-    def _bc_loss(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
-        """``L_d`` of eq. 6: the diffusion actor's imitation loss at the data's actions."""
-        bc_loss = self.actor.loss(actions, self.policy.actor_features(obs))
-        return bc_loss, {"bc_loss": bc_loss.detach()}
+    def _bc_loss(self, obs: th.Tensor, actions: th.Tensor, weight_temp: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """``L_d`` of eq. 6: the diffusion actor's imitation loss at the data's actions (advantage-weighted under
+        ``bc_weight_temp``; ``weight_temp`` is this step's temperature, a 0-d tensor)."""
+        features = self.policy.actor_features(obs)
+        if self.bc_weight_temp is None:
+            bc_loss = self.actor.loss(actions, features)
+            return bc_loss, {"bc_loss": bc_loss.detach()}
+        with th.no_grad():  # A = Q(s, a) - Q(s, a_ema), both the pessimistic value of eq. 4 at the current state
+            q = self.critic(th.cat([obs, obs]), th.cat([actions, self._sample_target(features)]))  # [N, 2B]
+            q_data, q_ema = pessimistic_q(q.view(q.shape[0], 2, -1), self.top_k, self.lcb_coef)  # [B] each
+            weights = advantage_weights(q_data - q_ema, weight_temp, self.bc_max_weight)  # [B]
+        bc_loss = self.actor.loss(actions, features, weights)
+        # the weights' effective sample size as a fraction of the batch: 1 is plain imitation
+        ess = weights.sum().pow(2) / (weights.shape[0] * weights.pow(2).sum())
+        return bc_loss, {"bc_loss": bc_loss.detach(), "imitation_ess": ess, "imitation_weight_max": weights.max()}
 
     def _q_term(self, obs: th.Tensor, eta: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """``eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor)."""
