@@ -13,7 +13,13 @@ from sb3_pola.common.diffusion import NoiseSchedule
 from sb3_pola.common.torch_layers import vectorized_mlp
 from sb3_pola.pola import pola as pola_module
 from sb3_pola.pola.fast_sampling import sample_chain, sample_no_grad
-from sb3_pola.pola.losses import lookahead_weights, pessimistic_q, value_expansion_objective, value_lower_bound
+from sb3_pola.pola.losses import (
+    advantage_weights,
+    lookahead_weights,
+    pessimistic_q,
+    value_expansion_objective,
+    value_lower_bound,
+)
 from sb3_pola.pola.pola import PAPER_FORM, lookahead_q_objective
 from sb3_pola.pola.policies import DiffusionActor
 
@@ -382,6 +388,66 @@ def test_gradient_ratio_scales_with_eta():
             th.manual_seed(0)
             ratios.append(model.q_bc_gradient_ratio(batch.observations, batch.actions))
     assert ratios[1] == pytest.approx(3.0 * ratios[0], rel=1e-4)
+
+
+# ---------------------------------------------------------------- advantage-weighted imitation (bc_weight_temp)
+def test_advantage_weights_are_scale_free_mean_one_and_clipped():
+    adv = th.tensor([0.0, 1.0, 2.0, 3.0])
+    assert th.equal(advantage_weights(adv, 0.0, 20.0), th.ones(4))  # temperature 0: plain imitation
+    w = advantage_weights(adv, 1.0, 20.0)
+    assert w.mean().item() == pytest.approx(1.0)
+    assert (w.diff() > 0).all()  # the better the data's action, the more it is imitated
+    # exp(beta A / std(A)), normalised: the rewards' scale and a constant baseline do not matter
+    expected = th.exp(adv / adv.std())
+    assert th.allclose(w, expected / expected.mean())
+    assert th.allclose(advantage_weights(100.0 * adv - 7.0, 1.0, 20.0), w)
+    clipped = advantage_weights(adv, 5.0, 1.5)
+    assert clipped.max().item() == pytest.approx(1.5)
+    assert th.allclose(clipped[:2], advantage_weights(adv, 5.0, 20.0)[:2])
+
+
+def _mixture_data() -> object:
+    """One-dimensional actions, half the rows at +0.5 and half at -0.5 under every state."""
+    data = synthetic_dataset(512, 3, 1, seed=0)
+    data.actions[:] = np.where(np.arange(512)[:, None] % 2 == 0, 0.5, -0.5).astype(np.float32)
+    return data
+
+
+@pytest.mark.parametrize("temp", [None, 2.0])
+def test_bc_weight_temp_imitates_the_better_mode_of_a_mixture(temp):
+    """A critic that prefers +0.5: the plain L_d imitates both modes (mean action 0), the weighted one the better."""
+    model = model_on_dataset(_mixture_data(), **light(rollout_length=0, eta=0.0, bc_weight_temp=temp))
+    model.critic = lambda obs, actions: -(actions - 0.5).pow(2).sum(dim=-1).expand(3, -1)  # [N, B]
+    buffer = model._setup_offline_data()
+    optimizer = model.actor.optimizer
+    model._bc_temp_value.fill_(temp or 0.0)
+    for _ in range(300):
+        batch = buffer.sample(64)
+        optimizer.zero_grad()
+        loss, stats = model._bc_loss(batch.observations, batch.actions, model._bc_temp_value)
+        loss.backward()
+        optimizer.step()
+    with th.no_grad():
+        actions = model.actor.sample(model.policy.actor_features(th.randn(400, 3)))
+    if temp is None:
+        assert "imitation_ess" not in stats
+        assert abs(actions.mean().item()) < 0.15
+    else:
+        assert 0.0 < stats["imitation_ess"].item() < 0.8
+        assert actions.mean().item() > 0.3
+
+
+def test_bc_weight_temp_is_checked_and_logged():
+    with pytest.raises(ValueError, match="bc_weight_temp"):
+        model_on_dataset(synthetic_dataset(100, 3, 2), **light(bc_weight_temp=-1.0))
+    with pytest.raises(ValueError, match="bc_max_weight"):
+        model_on_dataset(synthetic_dataset(100, 3, 2), **light(bc_weight_temp=1.0, bc_max_weight=0.0))
+    model = model_on_dataset(synthetic_dataset(400, 3, 2), **light(rollout_length=1, bc_weight_temp=1.0))
+    model.train(gradient_steps=4, batch_size=32)
+    model._record_train_stats()
+    logged = model.logger.name_to_value
+    assert 0.0 < logged["train/imitation_ess"] < 1.0
+    assert logged["train/imitation_weight_max"] <= 20.0
 
 
 # ---------------------------------------------------------------- the deterministic rule of predict

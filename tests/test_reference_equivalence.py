@@ -106,11 +106,21 @@ def reference_step(model, policy, batch) -> dict[str, object]:
 
     # L_d (eq. 6)
     features = feats(obs)
+    weights = th.ones(obs.shape[0])
+    if model.bc_weight_temp is not None:  # AWR's exp(beta A), A = Q(s, a) - Q(s, a_ema) in batch std units
+        with th.no_grad():
+            q_data, q_ema = (
+                ref_q(critic, obs, a).sort(dim=0).values[: model.top_k].mean(dim=0)
+                for a in (actions, ref_sample(policy.actor_ema, features))
+            )
+            adv = q_data - q_ema
+            weights = th.exp(model.bc_weight_temp * adv / adv.std())
+            weights = (weights / weights.mean()).clamp(max=model.bc_max_weight)
     t = th.randint(0, actor.n_diffusion_steps, (actions.shape[0],))
     noise = th.randn_like(actions)
     x_t = actor.schedule.sqrt_alphas_cumprod[t, None] * actions + actor.schedule.sqrt_one_minus_alphas_cumprod[t, None] * noise
     target = actions if actor.prediction_type == "sample" else noise  # the clean action (the default) or the noise
-    bc_loss = ((actor.predict_noise(x_t, t, features) - target) ** 2).mean()
+    bc_loss = (weights * ((actor.predict_noise(x_t, t, features) - target) ** 2).mean(dim=-1)).mean()
     # L_q (eq. 3, 4): gamma^i-weighted top-K pessimistic Q along the model rollout, masked after termination
     state, action = obs, ref_sample(actor, features)
     alive = th.ones(obs.shape[0])
@@ -189,6 +199,9 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         {"lcb_coef": 1.5},
         {"critic_layer_norm": False},  # the paper's plain critics (LayerNorm ones are the default)
         {"lookahead_weight": 1.0, "eta": 1.0},  # the paper's eq. 3 weights (#23's twelfth pass: 1/16 and 3.94)
+        # advantage-weighted imitation (#23's twenty-first pass), with and without the weights' clip
+        {"bc_weight_temp": 1.0},
+        {"bc_weight_temp": 3.0, "bc_max_weight": 1.5},
     ],
 )
 def test_update_matches_reference(kwargs):
@@ -347,10 +360,18 @@ def test_compiled_mish_equals_mish():
 
 @pytest.mark.slow  # torch.compile for minutes; the fallback path: test_compile_update_falls_back_to_eager
 @pytest.mark.parametrize(
-    "cudagraph_path, critic_diversity, model_td_weight, lookahead_actions",
-    [(False, 0.0, 0.0, "actor"), (True, 0.0, 0.0, "actor"), (False, 0.5, 1.0, "actor"), (False, 0.0, 0.0, "ema")],
+    "cudagraph_path, critic_diversity, model_td_weight, lookahead_actions, bc_weight_temp",
+    [
+        (False, 0.0, 0.0, "actor", None),
+        (True, 0.0, 0.0, "actor", None),
+        (False, 0.5, 1.0, "actor", None),
+        (False, 0.0, 0.0, "ema", None),
+        (False, 0.0, 0.0, "actor", 1.0),
+    ],
 )
-def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diversity, model_td_weight, lookahead_actions):
+def test_compiled_update_matches_eager(
+    monkeypatch, cudagraph_path, critic_diversity, model_td_weight, lookahead_actions, bc_weight_temp
+):
     """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
 
     ``cudagraph_path`` runs the CUDA code path on CPU (inductor's ``triton.cudagraphs`` option, step marks, output
@@ -358,7 +379,8 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diver
     ``critic_diversity`` the critic loss holds the similarity term's input gradients written out
     (sb3_pola.common.input_gradients), which a compiled graph differentiates once; with ``model_td_weight`` it also
     holds the model rollouts' TD loss; with ``lookahead_actions="ema"`` the EMA actor acts in the look-ahead, the
-    gradient through the model.
+    gradient through the model; with ``bc_weight_temp`` the imitation term's advantage weights (the EMA actor's chain
+    and a critic call inside the BC graph).
     """
     from torch._dynamo.utils import counters
 
@@ -379,6 +401,7 @@ def test_compiled_update_matches_eager(monkeypatch, cudagraph_path, critic_diver
         model_td_weight=model_td_weight,
         lookahead_actions=lookahead_actions,
         backprop_through_model=lookahead_actions == "ema",
+        bc_weight_temp=bc_weight_temp,
     )
     # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
     th._dynamo.reset()
