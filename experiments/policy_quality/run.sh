@@ -684,3 +684,26 @@ done
 for s in 2; do OUT=outputs/long100k_t0e1_s$s VARIANTS=T0 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0; done
 # halfcheetah/medium-replay at eta 1 over 100,000 steps (seed 0; rows appended to experiments/long100k/lrc/t3_eta1_scores.csv)
 OUT=outputs/long100k_t3e1hc_s0 VARIANTS=T3 EXTRA='{"eta": 1.0}' bash experiments/long100k/run.sh 0 halfcheetah/medium-replay-v0
+
+# --- twenty-first pass (stop 48): levers for hopper/medium's long-run fall that keep halfcheetah/medium-replay,
+# 30,000 steps, T = 3: EDAC's similarity term at weight 5 (CD5D30K), the critics at 3e-4 (CLR3D30K), and the new
+# option bc_weight_temp (advantage-weighted imitation) at eta 1 (AWE1D30K) and at eta 3.94 (AW1D30K)
+for n in 'CD5D30K {"compile_update": true, "critic_diversity": 5.0}' \
+  'CLR3D30K {"compile_update": true, "critic_learning_rate": 0.0003}' \
+  'AWE1D30K {"compile_update": true, "eta": 1.0, "bc_weight_temp": 1.0}'; do
+  screen --dataset halfcheetah/medium-replay-v0 --seed 0 --steps 30000 --rules obsnoise --name "${n%% *}" --kwargs "${n#* }"
+  for s in 0 1; do
+    screen --dataset hopper/medium-v0 --seed "$s" --steps 30000 --rules obsnoise --name "${n%% *}" --kwargs "${n#* }"
+  done
+done
+screen --dataset halfcheetah/medium-replay-v0 --seed 0 --steps 30000 --rules obsnoise --name AW1D30K --kwargs '{"compile_update": true, "bc_weight_temp": 1.0}'
+# critic_diversity 5 at 10,000 steps on the six datasets
+for s in 0 1 2; do
+  for d in pointmaze/medium-v0 hopper/medium-replay-v0 pointmaze/umaze-v0 halfcheetah/medium-replay-v0 halfcheetah/medium-v0 hopper/medium-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name CD5 --kwargs '{"compile_update": true, "critic_diversity": 5.0}'
+  done
+done
+# critic_diversity 5 over 100,000 steps, seed 0 on both long-run datasets (experiments/long100k/lrc/cd5_scores.csv)
+for d in hopper/medium-v0 halfcheetah/medium-replay-v0; do
+  OUT=outputs/long100k_cd5_${d%%/*}_s0 VARIANTS=T3 EXTRA='{"critic_diversity": 5.0}' bash experiments/long100k/run.sh 0 "$d"
+done
