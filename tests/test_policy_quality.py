@@ -448,6 +448,8 @@ def test_bc_weight_temp_is_checked_and_logged():
     logged = model.logger.name_to_value
     assert 0.0 < logged["train/imitation_ess"] < 1.0
     assert logged["train/imitation_weight_max"] <= 20.0
+    batch = model._setup_offline_data().sample(32)  # the diagnostic measures the weighted L_d as trained
+    assert model.q_bc_gradient_ratio(batch.observations, batch.actions) > 0
 
 
 # ---------------------------------------------------------------- the deterministic rule of predict

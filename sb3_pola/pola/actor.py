@@ -91,10 +91,10 @@ class DiffusionActor(nn.Module):
         x_t = self.schedule.add_noise(actions, noise, t)
         # eq. 6: || eps - eps_theta(sqrt(abar_t) a + sqrt(1 - abar_t) eps, s_new, t) ||^2 (a in place of eps for x0)
         target = actions if self.prediction_type == "sample" else noise
+        prediction = self.predict_noise(x_t, t, features)
         if weights is None:
-            return F.mse_loss(self.predict_noise(x_t, t, features), target)
-        per_row = (self.predict_noise(x_t, t, features) - target).pow(2).mean(dim=-1)  # [B]
-        return (weights * per_row).mean()
+            return F.mse_loss(prediction, target)
+        return (weights * (prediction - target).pow(2).mean(dim=-1)).mean()  # [B] rows, weighted
 
     def sample(
         self,

@@ -986,7 +986,8 @@ class POLA(OfflineAlgorithm):
         params = [p for p in self.actor.parameters() if p.requires_grad]
         with th.random.fork_rng(devices=[self.device] if self.device.type == "cuda" else []), self._critic_frozen():
             features = self.policy.actor_features(obs)
-            bc_grads = th.autograd.grad(self.actor.loss(actions, features), params, allow_unused=True)
+            bc_loss, _ = self._bc_loss(obs, actions, self._bc_temp_value)  # L_d as trained (weighted if bc_weight_temp)
+            bc_grads = th.autograd.grad(bc_loss, params, allow_unused=True)
             q_loss, _ = self._lookahead_q_loss(obs, features)
             q_grads = th.autograd.grad(self._eta_value * q_loss, params, allow_unused=True)
 
