@@ -1,0 +1,107 @@
+"""#23's long-run comparisons, one figure each (mean over seeds, a band of one standard deviation):
+
+    python experiments/long100k/plot_long.py [--figure eta|cd5_halfcheetah|cd5_hopper_amd] [--out PNG]
+
+- ``eta`` (twentieth pass): hopper/medium at the two values of eta, T = 0 and T = 3, BC with the package's actor and
+  d3rlpy's TD3+BC (``lrc/scores.csv`` the defaults, ``lrc/t3_eta1_scores.csv``, ``lrc/t0_scores.csv``,
+  ``lrc/t0_eta1_scores.csv``, ``lrc/bc_scores.csv``, ``peers.csv``);
+- ``cd5_halfcheetah`` (twenty-second pass): halfcheetah/medium-replay, the defaults against ``critic_diversity`` 5
+  (``lrc/cd5_scores.csv``), with BC and TD3+BC;
+- ``cd5_hopper_amd`` (twenty-second pass): hopper/medium of the AMD collection (``hopper_amd/``: another file than the
+  other hopper rows, see ``experiments/hopper/collect_summary.json``), the defaults, ``critic_diversity`` 5 and BC.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+from collections import defaultdict
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from sb3_pola.grid.rows import read_rows
+
+HERE = pathlib.Path(__file__).parent
+# name: (dataset, title, y limits, [(label, file, variant, colour, line style)])
+FIGURES = {
+    "eta": (
+        "hopper/medium-v0",
+        "the Q term's weight over 100,000 steps",
+        (10, 80),
+        [
+            ("POLA defaults (T = 3, eta 3.94)", "lrc/scores.csv", "T3", "tab:red", "-"),
+            ("POLA T = 3, eta 1", "lrc/t3_eta1_scores.csv", "T3", "tab:purple", "-"),
+            ("POLA T = 0, eta 3.94", "lrc/t0_scores.csv", "T0", "tab:blue", "-"),
+            ("POLA T = 0, eta 1", "lrc/t0_eta1_scores.csv", "T0", "tab:cyan", "-"),
+            ("BC, package actor", "lrc/bc_scores.csv", "BC", "tab:gray", "--"),
+            ("d3rlpy TD3+BC", "peers.csv", "d3rlpy-TD3+BC", "black", "--"),
+        ],
+    ),
+    "cd5_halfcheetah": (
+        "halfcheetah/medium-replay-v0",
+        "critic_diversity 5 over 100,000 steps",
+        (0, 50),
+        [
+            ("POLA defaults (critic_diversity 1)", "lrc/scores.csv", "T3", "tab:red", "-"),
+            ("POLA critic_diversity 5", "lrc/cd5_scores.csv", "T3", "tab:green", "-"),
+            ("BC, package actor", "lrc/scores.csv", "BC", "tab:gray", "--"),
+            ("d3rlpy TD3+BC", "peers.csv", "d3rlpy-TD3+BC", "black", "--"),
+        ],
+    ),
+    "cd5_hopper_amd": (
+        "hopper/medium-v0",
+        "(AMD collection) critic_diversity 5 over 100,000 steps",
+        (10, 70),
+        [
+            ("POLA defaults (critic_diversity 1)", "hopper_amd/scores.csv", "T3", "tab:red", "-"),
+            ("POLA critic_diversity 5", "hopper_amd/cd5_scores.csv", "T3", "tab:green", "-"),
+            ("BC, package actor", "hopper_amd/bc_scores.csv", "BC", "tab:gray", "--"),
+        ],
+    ),
+}
+OUT = {
+    "eta": "lrc/fig_eta_hopper_medium-v0.png",
+    "cd5_halfcheetah": "lrc/fig_cd5_halfcheetah_medium-replay-v0.png",
+    "cd5_hopper_amd": "hopper_amd/fig_cd5_hopper_medium-v0.png",
+}
+
+
+def curve(path: pathlib.Path, dataset: str, variant: str) -> tuple[list[int], np.ndarray, np.ndarray, int]:
+    """Steps, mean and std over seeds, number of seeds of one variant's evaluations."""
+    by_step: dict[int, list[float]] = defaultdict(list)
+    for row in read_rows(path):
+        if row["dataset"] == dataset and row["variant"] == variant:
+            by_step[row["step"]].append(row["score"])
+    steps = sorted(by_step)
+    values = [by_step[s] for s in steps]
+    return steps, np.array([np.mean(v) for v in values]), np.array([np.std(v) for v in values]), max(map(len, values))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--figure", choices=sorted(FIGURES), default="eta")
+    parser.add_argument("--out", help="the PNG to write (default: the figure's file beside its CSVs)")
+    args = parser.parse_args()
+    dataset, title, ylim, curves = FIGURES[args.figure]
+    fig, ax = plt.subplots(figsize=(6.5, 4.0), dpi=90)
+    for label, name, variant, color, style in curves:
+        steps, mean, std, n = curve(HERE / name, dataset, variant)
+        ax.plot(steps, mean, style, marker="o", ms=3, color=color, label=f"{label} (n={n})")
+        ax.fill_between(steps, mean - std, mean + std, color=color, alpha=0.12)
+    ax.set_title(f"{dataset}: {title}", fontsize=10)
+    ax.set_xlabel("gradient steps")
+    ax.set_ylabel("D4RL-normalised score")
+    ax.set_ylim(*ylim)
+    ax.legend(fontsize=7, loc="lower right" if args.figure == "cd5_halfcheetah" else "upper left", ncol=2)
+    fig.tight_layout()
+    out = args.out or str(HERE / OUT[args.figure])
+    fig.savefig(out)
+    print(out)
+
+
+if __name__ == "__main__":
+    main()
