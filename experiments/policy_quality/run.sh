@@ -707,3 +707,13 @@ done
 for d in hopper/medium-v0 halfcheetah/medium-replay-v0; do
   OUT=outputs/long100k_cd5_${d%%/*}_s0 VARIANTS=T3 EXTRA='{"critic_diversity": 5.0}' bash experiments/long100k/run.sh 0 "$d"
 done
+
+# --- twenty-second pass (stop 49): critic_diversity 5 over 100,000 steps, more seeds. halfcheetah/medium-replay
+# seeds 1-2 (experiments/long100k/lrc/cd5_scores.csv); hopper/medium seeds 1-2 with the defaults and BC on the same
+# file (experiments/long100k/hopper_amd/: the hopper file collect.sh makes on an AMD CPU, collect_summary.json)
+for s in 1 2; do
+  OUT=outputs/long100k_cd5_halfcheetah_s$s VARIANTS=T3 EXTRA='{"critic_diversity": 5.0}' bash experiments/long100k/run.sh "$s" halfcheetah/medium-replay-v0
+  OUT=outputs/long100k_cd5_hopper_s$s VARIANTS=T3 EXTRA='{"critic_diversity": 5.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0
+  OUT=outputs/long100k_defaults_hopper_s$s VARIANTS=T3 bash experiments/long100k/run.sh "$s" hopper/medium-v0
+done
+OUT=outputs/long100k_bc_hopper_s1 VARIANTS=BC bash experiments/long100k/run.sh 1 hopper/medium-v0
