@@ -48,7 +48,7 @@ FIGURES = {
         [
             ("POLA defaults (critic_diversity 1)", "lrc/scores.csv", "T3", "tab:red", "-"),
             ("POLA critic_diversity 5", "lrc/cd5_scores.csv", "T3", "tab:green", "-"),
-            ("BC, package actor", "lrc/scores.csv", "BC", "tab:gray", "--"),
+            ("BC, package actor (tenth pass)", "lrc/scores.csv", "BC", "tab:gray", "--"),
             ("d3rlpy TD3+BC", "peers.csv", "d3rlpy-TD3+BC", "black", "--"),
         ],
     ),
