@@ -2,9 +2,15 @@
 
 Trains each variant on the first 90% of a dataset's transitions (whole episodes, in recording order) and
 measures the mean squared error of its action on the last 10% (up to 5,000 rows): the noise-free chain
-(``mse_det``) and one sample (``mse_sample``). One JSON line per variant on stdout.
+(``mse_det``) and one sample (``mse_sample``). With ``--episodes N`` it also plays the trained actor (the noise-free
+chain; an MSE regressor's output) for N episodes on the score protocol's resets (``score``, normalised where the
+dataset has reference scores). One JSON line per variant on stdout.
 
-    python experiments/policy_quality/bc_screen.py --dataset halfcheetah/medium-v0 [--variants mse eps x0 ...]
+    python experiments/policy_quality/bc_screen.py --dataset halfcheetah/medium-v0 [--variants mse eps x0 ...] \
+        [--episodes 10 [--eval-every 2000]]
+
+The ``mse-d3rlpy`` variant is d3rlpy's BC network in this loop (2 x 256, ReLU, states as recorded, no products,
+lr 1e-3): it separates what the regressor's loss does from what the package's inputs do.
 """
 
 from __future__ import annotations
@@ -15,11 +21,13 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import torch as th
 from torch import nn
 from torch.nn import functional as F
 
-from sb3_pola.common.datasets import load_offline_dataset
+from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env
+from sb3_pola.common.evaluation import episode_returns
 from sb3_pola.common.torch_layers import StateProductsExtractor
 from sb3_pola.pola.fast_sampling import sample_no_grad
 from sb3_pola.pola.policies import DiffusionActor
@@ -38,6 +46,18 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "x0-noprod": {"prediction_type": "sample", "products": False},
     "x0-lr1e-3-noprod": {"prediction_type": "sample", "lr": 1e-3, "products": False},
     "x0-10steps": {"prediction_type": "sample", "n_steps": 10},
+    "mse-lr1e-3": {"kind": "mse", "lr": 1e-3},
+    "mse-lr1e-3-noprod": {"kind": "mse", "lr": 1e-3, "products": False},
+    "mse-d3rlpy": {"kind": "mse", "lr": 1e-3, "arch": [256, 256], "products": False, "relu": True, "raw": True},
+    "x0-lr1e-3-raw": {"prediction_type": "sample", "lr": 1e-3, "raw": True},
+    "x0-256-lr1e-3-relu-raw-noprod": {
+        "prediction_type": "sample",
+        "lr": 1e-3,
+        "arch": [256, 256],
+        "products": False,
+        "relu": True,
+        "raw": True,
+    },
 }
 
 
@@ -47,18 +67,34 @@ def build(cfg: dict[str, Any], extractor: StateProductsExtractor, act_dim: int) 
         layers: list[nn.Module] = []
         width = extractor.features_dim
         for hidden in cfg["arch"]:
-            layers += [nn.Linear(width, hidden), nn.Mish()]
+            layers += [nn.Linear(width, hidden), nn.ReLU() if cfg.get("relu") else nn.Mish()]
             width = hidden
         mlp = nn.Sequential(*layers, nn.Linear(width, act_dim), nn.Tanh())
         return mlp, lambda o, a: F.mse_loss(mlp(extractor(o)), a), lambda o, det: mlp(extractor(o))
     kind = cfg["prediction_type"]
-    actor = DiffusionActor(extractor.features_dim, act_dim, cfg["arch"], cfg["n_steps"], prediction_type=kind)
+    activation = nn.ReLU if cfg.get("relu") else nn.Mish
+    actor = DiffusionActor(
+        extractor.features_dim, act_dim, cfg["arch"], cfg["n_steps"], prediction_type=kind, activation_fn=activation
+    )
 
     def act(obs: th.Tensor, deterministic: bool) -> th.Tensor:
         generator = th.Generator().manual_seed(123)
         return sample_no_grad(actor, extractor(obs), generator=generator, deterministic=deterministic)
 
     return actor, lambda o, a: actor.loss(a, extractor(o)), act
+
+
+def play(data: OfflineDataset, act: Callable, episodes: int, seed: int) -> float:
+    """The score of ``act``'s noise-free action over ``episodes`` episodes on the score protocol's resets."""
+    env = make_env(data)
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        with th.no_grad():
+            return act(th.as_tensor(obs, dtype=th.float32)[None], True)[0].numpy()
+
+    returns = episode_returns(env, policy, episodes, 10_000 * (seed + 1), [])
+    score = data.normalized_score(returns)
+    return round(score if score is not None else float(returns.mean()), 1)
 
 
 def main() -> None:
@@ -68,6 +104,8 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--batch-size", type=int, default=128)
+    parser.add_argument("--episodes", type=int, default=0, help="episodes of the trained actor (0: none)")
+    parser.add_argument("--eval-every", type=int, default=0, help="with --episodes, also play every N steps")
     args = parser.parse_args()
     th.set_num_threads(1)
     data = load_offline_dataset(args.dataset)
@@ -80,13 +118,17 @@ def main() -> None:
         cfg = {"lr": 3e-4, "arch": [128, 128], "products": True, "n_steps": 5, **VARIANTS[name]}
         th.manual_seed(args.seed)
         extractor = StateProductsExtractor(data.observation_space, use_state_products=cfg["products"])
-        extractor.set_normalization(mean, std)
+        if cfg.get("raw"):  # the states as recorded, as d3rlpy's BC sees them
+            extractor.set_normalization(th.zeros_like(mean), th.ones_like(std))
+        else:
+            extractor.set_normalization(mean, std)
         net, loss_fn, act = build(cfg, extractor, actions.shape[1])
         optimizer = th.optim.Adam(net.parameters(), lr=cfg["lr"])
         scheduler = th.optim.lr_scheduler.CosineAnnealingLR(optimizer, args.steps) if cfg.get("cosine") else None
         generator = th.Generator().manual_seed(args.seed)
         start = time.time()
-        for _ in range(args.steps):
+        curve: list[float] = []
+        for step in range(1, args.steps + 1):
             idx = th.randint(0, len(train_obs), (args.batch_size,), generator=generator)
             loss = loss_fn(train_obs[idx], train_act[idx])
             optimizer.zero_grad()
@@ -94,11 +136,17 @@ def main() -> None:
             optimizer.step()
             if scheduler is not None:
                 scheduler.step()
+            if args.episodes and args.eval_every and step % args.eval_every == 0 and step < args.steps:
+                curve.append(play(data, act, args.episodes, args.seed))
         with th.no_grad():
             mse_det = F.mse_loss(act(test_obs, True), test_act).item()
             mse_sample = F.mse_loss(act(test_obs, False), test_act).item()
         row = {"dataset": args.dataset, "variant": name, "seed": args.seed, "steps": args.steps}
         row.update(mse_det=round(mse_det, 4), mse_sample=round(mse_sample, 4), s=round(time.time() - start, 1))
+        if args.episodes:
+            row["score"] = play(data, act, args.episodes, args.seed)
+            if curve:
+                row["scores"] = [*curve, row["score"]]
         print(json.dumps(row), flush=True)
 
 
