@@ -49,6 +49,16 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "mse-lr1e-3": {"kind": "mse", "lr": 1e-3},
     "mse-lr1e-3-noprod": {"kind": "mse", "lr": 1e-3, "products": False},
     "mse-d3rlpy": {"kind": "mse", "lr": 1e-3, "arch": [256, 256], "products": False, "relu": True, "raw": True},
+    "mse-d3rlpy-ema": {
+        "kind": "mse",
+        "lr": 1e-3,
+        "arch": [256, 256],
+        "products": False,
+        "relu": True,
+        "raw": True,
+        "ema": 0.995,
+    },
+    "x0-lr1e-3-ema": {"prediction_type": "sample", "lr": 1e-3, "ema": 0.995},
     "x0-lr1e-3-raw": {"prediction_type": "sample", "lr": 1e-3, "raw": True},
     "x0-256-lr1e-3-relu-raw-noprod": {
         "prediction_type": "sample",
@@ -82,6 +92,30 @@ def build(cfg: dict[str, Any], extractor: StateProductsExtractor, act_dim: int) 
         return sample_no_grad(actor, extractor(obs), generator=generator, deterministic=deterministic)
 
     return actor, lambda o, a: actor.loss(a, extractor(o)), act
+
+
+class Ema:
+    """The package's weight average (``ema_decay``, every ``ema_update_freq`` = 5 steps from ``ema_start`` = 1000, a
+    copy before): :meth:`swap` puts the average into the network for an evaluation and back."""
+
+    def __init__(self, net: nn.Module, decay: float) -> None:
+        self.net, self.decay = net, decay
+        self.average = {k: v.detach().clone() for k, v in net.state_dict().items()}
+
+    def update(self, step: int) -> None:
+        if step % 5:
+            return
+        with th.no_grad():
+            for k, v in self.net.state_dict().items():
+                if step < 1000:
+                    self.average[k].copy_(v)
+                else:
+                    self.average[k].lerp_(v, 1.0 - self.decay)
+
+    def swap(self) -> None:
+        current = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
+        self.net.load_state_dict(self.average)
+        self.average = current
 
 
 def play(data: OfflineDataset, act: Callable, episodes: int, seed: int) -> float:
@@ -126,6 +160,7 @@ def main() -> None:
         optimizer = th.optim.Adam(net.parameters(), lr=cfg["lr"])
         scheduler = th.optim.lr_scheduler.CosineAnnealingLR(optimizer, args.steps) if cfg.get("cosine") else None
         generator = th.Generator().manual_seed(args.seed)
+        ema = Ema(net, cfg["ema"]) if "ema" in cfg else None
         start = time.time()
         curve: list[float] = []
         for step in range(1, args.steps + 1):
@@ -136,8 +171,16 @@ def main() -> None:
             optimizer.step()
             if scheduler is not None:
                 scheduler.step()
+            if ema is not None:
+                ema.update(step)
             if args.episodes and args.eval_every and step % args.eval_every == 0 and step < args.steps:
+                if ema is not None:
+                    ema.swap()
                 curve.append(play(data, act, args.episodes, args.seed))
+                if ema is not None:
+                    ema.swap()
+        if ema is not None:  # everything below measures the average
+            ema.swap()
         with th.no_grad():
             mse_det = F.mse_loss(act(test_obs, True), test_act).item()
             mse_sample = F.mse_loss(act(test_obs, False), test_act).item()

@@ -717,3 +717,33 @@ for s in 1 2; do
   OUT=outputs/long100k_defaults_hopper_s$s VARIANTS=T3 bash experiments/long100k/run.sh "$s" hopper/medium-v0
 done
 OUT=outputs/long100k_bc_hopper_s1 VARIANTS=BC bash experiments/long100k/run.sh 1 hopper/medium-v0
+
+# --- twenty-third pass (stop 50): the 10,000-step grid on the AMD collection of experiments/hopper/collect.sh
+# (DATA=<folder> bash experiments/hopper/collect.sh on an AMD CPU; experiments/hopper/grid10k_amd/). Point
+# MINARI_DATASETS_PATH at that folder (DATA defaults to it).
+DATA="${DATA:-${MINARI_DATASETS_PATH:-}}"
+for d in hopper/medium-v0 hopper/medium-replay-v0; do
+  "$PY" -m sb3_pola.cli score --preset cpu --data-dir "$DATA" --device cpu --threads 1 --variants T3 T0 BC \
+    --datasets "$d" --seeds 0 1 2 --out "$OUT/grid10k_amd_${d//\//_}"
+  "$PY" -m sb3_pola.cli peers --data-dir "$DATA" --datasets "$d" --algos bc td3bc iql --seeds 0 1 2 --steps 10000 \
+    --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/grid10k_amd_${d//\//_}"
+  # eta 1 on the same file
+  "$PY" -m sb3_pola.cli score --preset cpu --data-dir "$DATA" --device cpu --threads 1 --variants T3 --extra '{"eta": 1.0}' \
+    --datasets "$d" --seeds 0 1 2 --out "$OUT/grid10k_amd_eta1_${d//\//_}"
+done
+# BC with the package's actor without its weight average
+"$PY" -m sb3_pola.cli score --preset cpu --data-dir "$DATA" --device cpu --threads 1 --variants BC --extra '{"ema_decay": 0.0}' \
+  --datasets hopper/medium-v0 --seeds 0 1 2 --out "$OUT/grid10k_amd_ema0_hopper_medium-v0"
+# single-seed screens of BC with the package's actor (both rules; BCLRC on seeds 0-2)
+BCD='"eta": 0.0, "rollout_length": 0, "compile_update": true'
+for s in 0 1 2; do screen --dataset hopper/medium-v0 --seed "$s" --name BCLRC --kwargs "{$BCD}"; done
+for n in "BCNP, \"use_state_products\": false" "BCRELU, \"policy_kwargs\": {\"activation_fn\": \"ReLU\"}" \
+  "BCW256, \"policy_kwargs\": {\"net_arch\": [256, 256]}" "BCK20, \"n_diffusion_steps\": 20" "BCEMA0, \"ema_decay\": 0.0" \
+  "BCEPS, \"prediction_type\": \"epsilon\""; do
+  screen --dataset hopper/medium-v0 --seed 0 --name "${n%%,*}" --kwargs "{$BCD${n#*,}}"
+done
+# what d3rlpy BC's lead is made of: its network and the package's actor in one loop, with and without the weight average
+for s in 0 1 2; do
+  "$PY" experiments/policy_quality/bc_screen.py --dataset hopper/medium-v0 --episodes 10 --eval-every 2000 --batch-size 100 \
+    --seed "$s" --variants mse-d3rlpy x0-lr1e-3 mse-d3rlpy-ema x0-lr1e-3-ema
+done
