@@ -747,3 +747,12 @@ for s in 0 1 2; do
   "$PY" experiments/policy_quality/bc_screen.py --dataset hopper/medium-v0 --episodes 10 --eval-every 2000 --batch-size 100 \
     --seed "$s" --variants mse-d3rlpy x0-lr1e-3 mse-d3rlpy-ema x0-lr1e-3-ema
 done
+# seeds 3-7 on the second file's hopper/medium (experiments/hopper/grid10k_amd/medium_seeds3-7/)
+"$PY" -m sb3_pola.cli peers --data-dir "$DATA" --datasets hopper/medium-v0 --algos bc --seeds 3 4 5 6 7 --steps 10000 \
+  --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/grid10k_amd_more"
+"$PY" -m sb3_pola.cli score --preset cpu --data-dir "$DATA" --device cpu --threads 1 --variants BC T3 \
+  --datasets hopper/medium-v0 --seeds 3 4 5 6 7 --out "$OUT/grid10k_amd_more"
+# a third hopper file: SEED=1 DATA=<folder1> bash experiments/hopper/collect.sh (experiments/hopper/collect_summary_seed1.json),
+# then on it (experiments/hopper/grid10k_seed1/medium/):
+#   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T3 BC --datasets hopper/medium-v0 --seeds 0 1 2 --out <out>
+#   sb3-pola peers --data-dir <folder1> --datasets hopper/medium-v0 --algos bc --seeds 0 1 2 --steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out <out>
