@@ -756,3 +756,4 @@ done
 # then on it (experiments/hopper/grid10k_seed1/medium/):
 #   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T3 BC --datasets hopper/medium-v0 --seeds 0 1 2 --out <out>
 #   sb3-pola peers --data-dir <folder1> --datasets hopper/medium-v0 --algos bc --seeds 0 1 2 --steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out <out>
+#   (the same two commands with --datasets hopper/medium-replay-v0: experiments/hopper/grid10k_seed1/medium-replay/)
