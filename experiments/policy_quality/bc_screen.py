@@ -30,6 +30,7 @@ from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_
 from sb3_pola.common.evaluation import episode_returns
 from sb3_pola.common.torch_layers import StateProductsExtractor
 from sb3_pola.pola.fast_sampling import sample_no_grad
+from sb3_pola.pola.pola import _lerp_params
 from sb3_pola.pola.policies import DiffusionActor
 
 # name -> what departs from: the diffusion actor, 2 x 128, lr 3e-4, 5 steps, state products, constant lr
@@ -49,16 +50,6 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "mse-lr1e-3": {"kind": "mse", "lr": 1e-3},
     "mse-lr1e-3-noprod": {"kind": "mse", "lr": 1e-3, "products": False},
     "mse-d3rlpy": {"kind": "mse", "lr": 1e-3, "arch": [256, 256], "products": False, "relu": True, "raw": True},
-    "mse-d3rlpy-ema": {
-        "kind": "mse",
-        "lr": 1e-3,
-        "arch": [256, 256],
-        "products": False,
-        "relu": True,
-        "raw": True,
-        "ema": 0.995,
-    },
-    "x0-lr1e-3-ema": {"prediction_type": "sample", "lr": 1e-3, "ema": 0.995},
     "x0-lr1e-3-raw": {"prediction_type": "sample", "lr": 1e-3, "raw": True},
     "x0-256-lr1e-3-relu-raw-noprod": {
         "prediction_type": "sample",
@@ -69,6 +60,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
         "raw": True,
     },
 }
+# the same with the package's weight average of the actor (ema_decay 0.995)
+VARIANTS |= {f"{name}-ema": {**VARIANTS[name], "ema": 0.995} for name in ("mse-d3rlpy", "x0-lr1e-3")}
 
 
 def build(cfg: dict[str, Any], extractor: StateProductsExtractor, act_dim: int) -> tuple[nn.Module, Callable, Callable]:
@@ -95,27 +88,21 @@ def build(cfg: dict[str, Any], extractor: StateProductsExtractor, act_dim: int) 
 
 
 class Ema:
-    """The package's weight average (``ema_decay``, every ``ema_update_freq`` = 5 steps from ``ema_start`` = 1000, a
-    copy before): :meth:`swap` puts the average into the network for an evaluation and back."""
+    """The package's weight average of the actor (``POLA._update``: a copy until ``ema_start`` = 1000, then ``ema_decay``
+    every ``ema_update_freq`` = 5 steps, through the same ``_lerp_params``); :meth:`swap` exchanges the network's
+    weights with the average's, for an evaluation and back."""
 
     def __init__(self, net: nn.Module, decay: float) -> None:
         self.net, self.decay = net, decay
-        self.average = {k: v.detach().clone() for k, v in net.state_dict().items()}
+        self.average = [p.detach().clone() for p in net.parameters()]
 
     def update(self, step: int) -> None:
-        if step % 5:
-            return
-        with th.no_grad():
-            for k, v in self.net.state_dict().items():
-                if step < 1000:
-                    self.average[k].copy_(v)
-                else:
-                    self.average[k].lerp_(v, 1.0 - self.decay)
+        if step % 5 == 0:
+            _lerp_params(self.net.parameters(), self.average, 1.0 - (self.decay if step >= 1000 else 0.0))
 
     def swap(self) -> None:
-        current = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
-        self.net.load_state_dict(self.average)
-        self.average = current
+        for param, average in zip(self.net.parameters(), self.average, strict=True):
+            param.data, average.data = average.data, param.data
 
 
 def play(data: OfflineDataset, act: Callable, episodes: int, seed: int) -> float:
