@@ -757,3 +757,11 @@ done
 #   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T3 BC --datasets hopper/medium-v0 --seeds 0 1 2 --out <out>
 #   sb3-pola peers --data-dir <folder1> --datasets hopper/medium-v0 --algos bc --seeds 0 1 2 --steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out <out>
 #   (the same two commands with --datasets hopper/medium-replay-v0: experiments/hopper/grid10k_seed1/medium-replay/)
+# --- twenty-fourth pass (stop 51): hopper on more collections. Two more files (SEED=2, 3) and the grid on each,
+# one core a SEED (experiments/hopper/files/seed{2,3}/; collect_summary_seed{2,3}.json), then what each file holds:
+#   SEEDS="2 3" ROOT=<folder> bash experiments/hopper/files.sh
+#   python experiments/hopper/file_stats.py --data-dir <folder0> <folder1> <ROOT>/seed2 <ROOT>/seed3
+# On the third file (<folder1>, SEED=1): the defaults at eta 1 and T = 0 on hopper/medium
+# (experiments/hopper/grid10k_seed1/medium/{eta1,t0}_scores.csv):
+#   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T3 --extra '{"eta": 1.0}' --datasets hopper/medium-v0 --seeds 0 1 2 --out <out>
+#   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T0 --datasets hopper/medium-v0 --seeds 0 1 2 --out <out>
