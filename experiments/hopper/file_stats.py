@@ -22,7 +22,7 @@ DATASETS = ("hopper/medium-v0", "hopper/medium-replay-v0")
 
 def file_row(data_dir: pathlib.Path, dataset_id: str, above: float) -> list[str]:
     data = load_offline_dataset(data_dir / dataset_id, use_cache=False)
-    scores = np.asarray(normalized_scores(data.episode_returns, data.ref_min_score, data.ref_max_score))
+    scores = normalized_scores(data.episode_returns, data.ref_min_score, data.ref_max_score)
     lengths = np.diff(np.concatenate([[-1], np.flatnonzero(data.episode_ends())]))
     if len(lengths) != len(scores):
         raise ValueError(f"{data_dir / dataset_id}: {len(lengths)} episode ends against {len(scores)} episode returns")
