@@ -153,6 +153,25 @@ def test_presets_and_overrides() -> None:
         score_cli.parse_args(["--variants", "T7"])
 
 
+def test_extra_refuses_arguments_with_their_own_flag() -> None:
+    """POLA would get ``n_critics`` twice (the cell passes the preset's) and fail only when the first cell starts."""
+    for key, flag in (("n_critics", "--n-critics"), ("batch_size", "--batch-size"), ("dynamics_kwargs", "--dynamics-kwargs")):
+        args = score_cli.parse_args(["--preset", "cpu", "--extra", json.dumps({key: 10, "eta": 1.0})])
+        with pytest.raises(UsageError, match=f"{key} \\(use {flag}\\)"):
+            grid_variants.build_config(args, "cpu")
+    config = grid_variants.build_config(score_cli.parse_args(["--preset", "cpu", "--n-critics", "10"]), "cpu")
+    assert config.n_critics == 10
+
+
+def test_extra_policy_kwargs_reach_the_policy(score_data: pathlib.Path) -> None:
+    """A ``policy_kwargs`` entry of ``--extra`` adds to the preset's policy arguments instead of clashing with them."""
+    extra = json.dumps({"policy_kwargs": {"time_embedding_dim": 8}})
+    config = grid_variants.build_config(score_cli.parse_args([*TINY, "--preset", "cpu", "--extra", extra]), "cpu")
+    model = grid_cell.new_cell_model("T0", 0, config, "test/pendulum-v0", "cpu")
+    assert model.policy.time_embedding_dim == 8
+    assert model.policy_kwargs["net_arch"] == config.net_arch
+
+
 def test_cells_keep_statistics_and_models_and_reevaluate(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
     """Every cell writes its training statistics and keeps its final model; --reevaluate scores it under other rules."""
     out = tmp_path / "out"

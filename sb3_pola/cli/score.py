@@ -84,7 +84,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--share-dynamics", action=argparse.BooleanOptionalAction, default=None, help="one dynamics fit per dataset"
     )
-    parser.add_argument("--extra", type=json_object, help="JSON of further POLA arguments, e.g. '{\"eta\": 0.5}'")
+    parser.add_argument(
+        "--extra",
+        type=json_object,
+        help='JSON of further POLA arguments, e.g. \'{"eta": 0.5}\'; a "policy_kwargs" entry adds to the policy\'s '
+        "arguments; batch size, critics, top-K, the dynamics model, seeds and device have their own flags",
+    )
     parser.add_argument(
         "--compile", action=argparse.BooleanOptionalAction, default=None, help="compile_update (the cpu preset: on)"
     )

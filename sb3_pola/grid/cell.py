@@ -70,6 +70,14 @@ def new_cell_model(variant: str, seed: int, config: Config, dataset: str, device
     :return: the model
     """
     _, kwargs, policy_kwargs = VARIANTS[variant]
+    extra = pola_kwargs({**config.extra, **kwargs})
+    # the policy's arguments: the configuration's, then --extra's (e.g. an activation), then the variant's
+    policy_kwargs = {
+        "net_arch": config.net_arch,
+        "n_action_samples": config.n_action_samples,
+        **extra.pop("policy_kwargs", {}),
+        **policy_kwargs,
+    }
     return POLA(
         "MlpPolicy",
         dataset=dataset,
@@ -78,10 +86,10 @@ def new_cell_model(variant: str, seed: int, config: Config, dataset: str, device
         top_k=config.top_k,
         dynamics_kwargs=config.dynamics_kwargs,
         dynamics_fit_kwargs=config.dynamics_fit_kwargs,
-        policy_kwargs={"net_arch": config.net_arch, "n_action_samples": config.n_action_samples, **policy_kwargs},
+        policy_kwargs=policy_kwargs,
         seed=seed,
         device=device,
-        **pola_kwargs({**config.extra, **kwargs}),
+        **extra,
     )
 
 

@@ -125,6 +125,19 @@ class Config:
         return hashlib.sha1(json.dumps(data, sort_keys=True, default=repr).encode()).hexdigest()[:10]
 
 
+# POLA arguments a cell passes from the configuration or the command line, with the flag that sets each
+GRID_ARGUMENTS: dict[str, str] = {
+    "batch_size": "--batch-size",
+    "n_critics": "--n-critics",
+    "top_k": "--top-k",
+    "dynamics_kwargs": "--dynamics-kwargs",
+    "dynamics_fit_kwargs": "--dynamics-steps",
+    "seed": "--seeds",
+    "device": "--device",
+    "dataset": "--datasets",
+}
+
+
 def pola_defaults(keys: Any) -> dict[str, Any]:
     """The defaults of these ``POLA`` arguments."""
     parameters = inspect.signature(POLA.__init__).parameters
@@ -200,6 +213,10 @@ def build_config(args: argparse.Namespace, device: str) -> Config:
         config.share_dynamics = args.share_dynamics
     if args.extra:
         config.extra = {**config.extra, **_json(args.extra)}
+    passed_by_cell = [key for key in GRID_ARGUMENTS if key in config.extra]
+    if passed_by_cell:  # POLA would get them twice and fail only when its first cell starts
+        flags = ", ".join(f"{key} (use {GRID_ARGUMENTS[key]})" for key in passed_by_cell)
+        raise UsageError(f"--extra cannot set the arguments every cell passes itself: {flags}")
     if args.compile is not None:
         config.extra = {**config.extra, "compile_update": args.compile}
     config.top_k = min(config.top_k, config.n_critics)
