@@ -765,3 +765,13 @@ done
 # (experiments/hopper/grid10k_seed1/medium/{eta1,t0}_scores.csv):
 #   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T3 --extra '{"eta": 1.0}' --datasets hopper/medium-v0 --seeds 0 1 2 --out <out>
 #   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T0 --datasets hopper/medium-v0 --seeds 0 1 2 --out <out>
+# --- twenty-fifth pass (stop 52): the third file's missing cells (experiments/hopper/grid10k_seed1/), then levers for
+# the narrow hopper files on hopper/medium of the second, third and fourth files (<ROOT>/seed<S>, files.sh's layout):
+#   sb3-pola peers --data-dir <folder1> --datasets hopper/medium-v0 --algos td3bc --seeds 0 1 2 --steps 10000 --eval-freq 2000 --eval-episodes 10 --threads 1 --out <out>
+#   (the same with --algos iql, and both with --datasets hopper/medium-replay-v0)
+#   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T0 --datasets hopper/medium-replay-v0 --seeds 0 1 2 --out <out>
+#   ROOT=<folder> FILES="0 1 2" OUT=<out> bash experiments/hopper/q_weight_screen.sh
+#   ROOT=<folder> FILES="0 1 2" SCREEN_SEEDS="1 2" TAGS=e1t3 OUT=<out> bash experiments/hopper/q_weight_screen.sh
+#   python experiments/hopper/screen_table.py <out> > experiments/hopper/q_weight_screen.csv
+# eta 1 + bc_weight_temp 3 on halfcheetah (the shared files), seed 0:
+#   sb3-pola score --preset cpu --data-dir <shared datasets> --device cpu --threads 1 --variants T3 --datasets halfcheetah/medium-v0 halfcheetah/medium-replay-v0 --seeds 0 --extra '{"eta": 1.0, "bc_weight_temp": 3.0}' --out <out>
