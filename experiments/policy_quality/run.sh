@@ -772,6 +772,9 @@ done
 #   sb3-pola score --preset cpu --data-dir <folder1> --device cpu --threads 1 --variants T0 --datasets hopper/medium-replay-v0 --seeds 0 1 2 --out <out>
 #   ROOT=<folder> FILES="0 1 2" OUT=<out> bash experiments/hopper/q_weight_screen.sh
 #   ROOT=<folder> FILES="0 1 2" SCREEN_SEEDS="1 2" TAGS=e1t3 OUT=<out> bash experiments/hopper/q_weight_screen.sh
+#   ROOT=<folder> FILES="2" SCREEN_SEEDS="1 2" TAGS=e394t1 OUT=<out> bash experiments/hopper/q_weight_screen.sh
+#   ROOT=<folder> FILES="0 2" SCREEN_SEEDS="1 2" TAGS=n10 OUT=<out> bash experiments/hopper/q_weight_screen.sh
+#   (seeds 1-2 write into the seed-0 folders, <tag>_file<S>; the runs here used separate ones, <tag>_file<S>_seeds12)
 #   python experiments/hopper/screen_table.py <out> > experiments/hopper/q_weight_screen.csv
 # eta 1 + bc_weight_temp 3 on halfcheetah (the shared files), seed 0:
 #   sb3-pola score --preset cpu --data-dir <shared datasets> --device cpu --threads 1 --variants T3 --datasets halfcheetah/medium-v0 halfcheetah/medium-replay-v0 --seeds 0 --extra '{"eta": 1.0, "bc_weight_temp": 3.0}' --out <out>
