@@ -71,7 +71,7 @@ def new_cell_model(variant: str, seed: int, config: Config, dataset: str, device
     """
     _, kwargs, policy_kwargs = VARIANTS[variant]
     extra = pola_kwargs({**config.extra, **kwargs})
-    # the policy's arguments: the configuration's, then --extra's (e.g. an activation), then the variant's
+    # the policy's arguments: the configuration's, then --extra's (JSON values, e.g. time_embedding_dim), then the variant's
     policy_kwargs = {
         "net_arch": config.net_arch,
         "n_action_samples": config.n_action_samples,
