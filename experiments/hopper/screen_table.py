@@ -14,6 +14,8 @@ import pathlib
 import re
 import sys
 
+from sb3_pola.grid.rows import read_rows
+
 NAME = re.compile(r"^(?P<tag>.+)_file(?P<file>\d+)")
 
 
@@ -27,10 +29,9 @@ def main() -> None:
         match = NAME.match(path.parent.name)
         if match is None:
             continue
-        with path.open() as f:
-            for row in csv.DictReader(f):
-                fields = [row[k] for k in ("dataset", "seed", "step", "score", "score_std", "eval_episodes")]
-                writer.writerow([match["tag"], match["file"], *fields])
+        for row in read_rows(path):
+            fields = [row[k] for k in ("dataset", "seed", "step", "score", "score_std", "eval_episodes")]
+            writer.writerow([match["tag"], match["file"], *fields])
 
 
 if __name__ == "__main__":
