@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # #23: the paper's 10 critics (the package default) against the CPU preset's 5 (docs/results.md, twenty-sixth pass).
-# POLA at the CPU preset (T = 3, seeds 0-2, 10,000 steps) with --n-critics 10, and with the preset's 5 where this
+# POLA at the CPU preset (T = 3, seeds 0-2, the mazes 0-4, 10,000 steps) with --n-critics 10, and with the preset's 5 where this
 # machine has no run of them yet: the shipped U-maze, the medium maze, halfcheetah/medium and medium-replay, and
 # hopper/medium of collect.sh files (ROOT/seed<S>, files.sh's layout; the 5-critic rows are files.sh's). One core.
 #   HC=<folder with halfcheetah/> MAZE=<folder with pointmaze/medium-v0> ROOT=<folder> bash experiments/critics10/run.sh
@@ -11,18 +11,19 @@ cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 PY="${PYTHON:-python}"
 OUT="${OUT:-outputs/critics10}"
-score() { "$PY" -m sb3_pola.cli score --preset cpu --device cpu --threads 1 --seeds 0 1 2 "$@"; }
-for n in 10 5; do
-  variants="T3"
-  [ "$n" = 5 ] && variants="T3 BC"  # BC with the package's actor beside the preset on the medium maze
-  score --variants T3 --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --n-critics $n --out "$OUT/n${n}_umaze"
-  score --variants $variants --data-dir "${MAZE:?set MAZE}" --datasets pointmaze/medium-v0 --n-critics $n --out "$OUT/n${n}_mmaze"
+score() { "$PY" -m sb3_pola.cli score --preset cpu --device cpu --threads 1 --variants T3 "$@"; }
+for n in 10 5; do  # the mazes' seeds spread more: 5 seeds there
+  score --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --seeds 0 1 2 3 4 --n-critics $n --out "$OUT/n${n}_umaze"
+  score --data-dir "${MAZE:?set MAZE}" --datasets pointmaze/medium-v0 --seeds 0 1 2 3 4 --n-critics $n --out "$OUT/n${n}_mmaze"
   for d in medium medium-replay; do
-    score --variants T3 --data-dir "${HC:?set HC}" --datasets "halfcheetah/$d-v0" --n-critics $n --out "$OUT/n${n}_halfcheetah_$d"
+    score --data-dir "${HC:?set HC}" --datasets "halfcheetah/$d-v0" --seeds 0 1 2 --n-critics $n --out "$OUT/n${n}_halfcheetah_$d"
   done
 done
+# BC with the package's actor and d3rlpy BC on the medium maze made here
+"$PY" -m sb3_pola.cli score --preset cpu --device cpu --threads 1 --variants BC --seeds 0 1 2 --data-dir "$MAZE" \
+  --datasets pointmaze/medium-v0 --out "$OUT/bc_mmaze"
 "$PY" -m sb3_pola.cli peers --data-dir "$MAZE" --datasets pointmaze/medium-v0 --algos bc --seeds 0 1 2 --steps 10000 \
   --eval-freq 2000 --eval-episodes 10 --threads 1 --out "$OUT/peers_mmaze"
 for S in ${FILES:-0 1 2 3}; do
-  score --variants T3 --data-dir "${ROOT:?set ROOT}/seed$S" --datasets hopper/medium-v0 --n-critics 10 --out "$OUT/n10_hopper_file$S"
+  score --data-dir "${ROOT:?set ROOT}/seed$S" --datasets hopper/medium-v0 --seeds 0 1 2 --n-critics 10 --out "$OUT/n10_hopper_file$S"
 done

@@ -2,7 +2,7 @@
 
     python experiments/critics10/table.py
 
-Reads the final evaluations kept here (``n10_*_scores.csv``, ``n5_*_scores.csv``: ``experiments/critics10/run.sh``)
+Reads the final evaluations kept here (``n10_*``, ``n5_*``, ``bc_mmaze_scores.csv``: ``experiments/critics10/run.sh``)
 and, for the hopper files' 5 critics and BC, the files.sh rows kept in ``experiments/hopper/``. Prints a markdown
 table: every seed, mean ± sample std, the difference of the means.
 """
@@ -36,7 +36,7 @@ ROWS: dict[str, tuple[tuple[pathlib.Path, str], tuple[pathlib.Path, str], tuple[
     "pointmaze/medium": (
         (HERE / "n10_mmaze_scores.csv", "T3"),
         (HERE / "n5_mmaze_scores.csv", "T3"),
-        (HERE / "n5_mmaze_scores.csv", "BC"),
+        (HERE / "bc_mmaze_scores.csv", "BC"),
     ),
     "hopper/medium, second file (SEED=0)": (
         (HERE / "n10_hopper_file0_scores.csv", "T3"),

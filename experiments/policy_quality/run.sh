@@ -778,3 +778,8 @@ done
 #   python experiments/hopper/screen_table.py <out> > experiments/hopper/q_weight_screen.csv
 # eta 1 + bc_weight_temp 3 on halfcheetah (the shared files), seed 0:
 #   sb3-pola score --preset cpu --data-dir <shared datasets> --device cpu --threads 1 --variants T3 --datasets halfcheetah/medium-v0 halfcheetah/medium-replay-v0 --seeds 0 --extra '{"eta": 1.0, "bc_weight_temp": 3.0}' --out <out>
+# --- twenty-sixth pass (stop 53): the paper's 10 critics on every dataset, the preset's 5 beside them, and the step's
+# cost (experiments/critics10/; the queue ran the same commands, seeds 3-4 of the mazes in folders of their own):
+#   HC=<shared datasets> MAZE=<medium maze folder> ROOT=<folder> bash experiments/critics10/run.sh
+#   python experiments/critics10/timing.py --rounds 300; python experiments/critics10/timing.py --rounds 300 --eager
+#   python experiments/critics10/table.py
