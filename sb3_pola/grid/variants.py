@@ -86,7 +86,8 @@ class Config:
     :param top_k: ``K`` smallest Q-values averaged in the policy loss
     :param n_action_samples: candidate actions per state at evaluation (picked by the critic)
     :param eval_rule: how the evaluations during training pick actions (:func:`apply_eval_rule`): ``ema``
-        (the default: ``n_action_samples`` noise-free chains of the variant's predict actor), ``stochastic``
+        (the default: the deterministic ``predict`` of the variant's predict actor, one chain under its
+        ``deterministic_rule`` or ``n_action_samples`` candidates), ``stochastic``
         (one sample of the EMA actor's noisy chain), ...; a rule other than ``ema`` overrides ``n_action_samples``
     :param dynamics_kwargs: arguments of the dynamics ensemble
     :param dynamics_fit_kwargs: arguments of its fit
@@ -260,8 +261,9 @@ def apply_eval_rule(model: Any, rule: str) -> bool:
     """Set how ``model.predict`` picks actions; return the ``deterministic`` flag to call it with.
 
     :param model: a POLA model
-    :param rule: ``ema`` (the noise-free chain of the EMA actor, the default), ``online`` (the same chain of
-        the trained actor), ``stochastic`` / ``online-stochastic`` (one sample of the noisy reverse chain, the
+    :param rule: ``ema`` (the EMA actor's deterministic ``predict``, the default: the chain under the policy's
+        ``deterministic_rule``, the observation's own noise unless set otherwise), ``online`` (the same of the trained
+        actor), ``stochastic`` / ``online-stochastic`` (one sample of the noisy reverse chain, the
         policy Diffusion-QL trains) or ``candidates<N>`` / ``online-candidates<N>`` (N noisy candidates of the
         EMA / online actor, the one with the highest pessimistic Q kept, as Diffusion-QL evaluates)
     """
