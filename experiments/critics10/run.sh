@@ -27,3 +27,8 @@ done
 for S in ${FILES:-0 1 2 3}; do
   score --data-dir "${ROOT:?set ROOT}/seed$S" --datasets hopper/medium-v0 --seeds 0 1 2 --n-critics 10 --out "$OUT/n10_hopper_file$S"
 done
+# the U-maze's imitation floor under the other evaluation rules: BC with the package's actor, its final models again
+"$PY" -m sb3_pola.cli score --preset cpu --device cpu --threads 1 --variants BC --seeds 0 1 2 \
+  --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --out "$OUT/bc_umaze"
+"$PY" -m sb3_pola.cli score --preset cpu --device cpu --threads 1 --variants BC --seeds 0 1 2 \
+  --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --out "$OUT/bc_umaze" --reevaluate online stochastic online-stochastic
