@@ -2,7 +2,8 @@
 # #23: the paper's 10 critics (the package default) against the CPU preset's 5 (docs/results.md, twenty-sixth pass).
 # POLA at the CPU preset (T = 3, seeds 0-2, the mazes 0-4, 10,000 steps) with --n-critics 10, and with the preset's 5 where this
 # machine has no run of them yet: the shipped U-maze, the medium maze, halfcheetah/medium and medium-replay, and
-# hopper/medium of collect.sh files (ROOT/seed<S>, files.sh's layout; the 5-critic rows are files.sh's). One core.
+# hopper/medium of collect.sh files and hopper/medium-replay of the SEED=0 one (ROOT/seed<S>, files.sh's layout; the
+# 5-critic rows are files.sh's). The U-maze's BC re-evaluated under the other evaluation rules. One core.
 #   HC=<folder with halfcheetah/> MAZE=<folder with pointmaze/medium-v0> ROOT=<folder> bash experiments/critics10/run.sh
 # The medium maze, if MAZE has none: sb3-pola collect --env PointMaze_Medium-v3 --kind planner --steps 100000 --seed 0
 # --out "$MAZE". Timing: python experiments/critics10/timing.py (and --eager). Table: python experiments/critics10/table.py
@@ -32,3 +33,4 @@ done
   --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --out "$OUT/bc_umaze"
 "$PY" -m sb3_pola.cli score --preset cpu --device cpu --threads 1 --variants BC --seeds 0 1 2 \
   --data-dir sb3_pola/data/datasets --datasets pointmaze/umaze-v0 --out "$OUT/bc_umaze" --reevaluate online stochastic online-stochastic
+score --data-dir "$ROOT/seed0" --datasets hopper/medium-replay-v0 --seeds 0 1 2 --n-critics 10 --out "$OUT/n10_hopper_replay_file0"

@@ -58,6 +58,11 @@ ROWS: dict[str, tuple[tuple[pathlib.Path, str], tuple[pathlib.Path, str], tuple[
         (HOPPER / "files/seed3/medium/t3_scores.csv", "T3"),
         (HOPPER / "files/seed3/medium/bc_scores.csv", "BC"),
     ),
+    "hopper/medium-replay, second file (SEED=0)": (
+        (HERE / "n10_hopper_replay_file0_scores.csv", "T3"),
+        (HOPPER / "grid10k_amd/medium-replay/scores.csv", "T3"),
+        (HOPPER / "grid10k_amd/medium-replay/scores.csv", "BC"),
+    ),
 }
 
 
