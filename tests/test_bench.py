@@ -65,3 +65,19 @@ def test_defaults_over_paper_form_checks_eager_and_compiled():
     assert checks["defaults_over_paper_form"]["met"] and abs(checks["defaults_over_paper_form"]["ratio"] - 1.2) < 1e-9
     assert not checks["defaults_over_paper_form_compiled"]["met"]
     assert abs(checks["defaults_over_paper_form_compiled"]["ratio"] - 1.4) < 1e-9
+
+
+def test_train_bench_times_the_callers_configurations(monkeypatch):
+    """``run(configs=...)`` builds and times the given configurations, not the benchmark's own list."""
+    from sb3_pola.benchmarks import train_bench
+    from sb3_pola.common.datasets import synthetic_dataset
+
+    monkeypatch.setattr(train_bench, "synthetic_dataset", lambda n, *a: synthetic_dataset(2_000, *a))
+    configs = [
+        {"name": f"N={n}", "task": "hopper", "kwargs": {"n_critics": n, "batch_size": 8}, "policy_kwargs": {"net_arch": [8]}}
+        for n in (2, 3)
+    ]
+    result = train_bench.run(quick=True, configs=configs)
+    assert [r["name"] for r in result["configs"]] == ["N=2", "N=3"]
+    assert [r["n_critics"] for r in result["configs"]] == [2, 3]
+    assert all(r["step_s"] > 0 and r["reps"] >= 3 for r in result["configs"])

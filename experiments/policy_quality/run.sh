@@ -781,5 +781,5 @@ done
 # --- twenty-sixth pass (stop 53): the paper's 10 critics on every dataset, the preset's 5 beside them, and the step's
 # cost (experiments/critics10/; the queue ran the same commands, seeds 3-4 of the mazes in folders of their own):
 #   HC=<shared datasets> MAZE=<medium maze folder> ROOT=<folder> bash experiments/critics10/run.sh
-#   python experiments/critics10/timing.py --rounds 300; python experiments/critics10/timing.py --rounds 300 --eager
+#   python experiments/critics10/timing.py; python experiments/critics10/timing.py --eager
 #   python experiments/critics10/table.py

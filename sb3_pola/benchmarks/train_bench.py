@@ -125,16 +125,18 @@ def run(
     policy_kwargs: dict[str, Any] | None = None,
     compiled: bool = False,
     names: list[str] | None = None,
+    configs: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Time every configuration, interleaved, and count FLOPs of the paper configurations.
 
     All models are built first; then rounds time one step (``chunk`` steps on CUDA) of every model in turn,
     and, for the configurations with a roofline, one replay of the step's matmuls alone. Interleaving
     makes the ratios fair on a machine whose load drifts. Rounds continue until the time budget is
-    spent (at least 3 rounds). Medians per configuration.
+    spent (at least 3 rounds). Medians per configuration. ``configs`` (same form as :func:`configurations`'
+    entries) times the caller's configurations instead.
     """
     datasets: dict[tuple[Any, ...], Any] = {}
-    configs = [c for c in configurations(quick, compiled) if names is None or c["name"] in names]
+    configs = [c for c in configs or configurations(quick, compiled) if names is None or c["name"] in names]
     models = [build(config, device, datasets, policy_kwargs or {}) for config in configs]
     chunk = 1 if th.device(device).type == "cpu" else 20
     tasks: list[tuple[str, Any, Callable[[], Any]]] = []
