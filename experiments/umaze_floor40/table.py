@@ -1,0 +1,75 @@
+"""The U-maze's imitation floor over 40 seeds (docs/results.md, twenty-seventh pass).
+
+    python experiments/umaze_floor40/table.py
+
+Reads the final evaluations kept here (``bc_scores.csv``: BC with the package's actor; ``peers.csv``: d3rlpy's BC;
+``experiments/umaze_floor40/run.sh``) and prints markdown: every seed, mean ± sample std, the difference of the means
+with Welch's standard error and a bootstrap interval over seeds, and how the done-when's 3-seed comparison comes out
+on the disjoint triples of seeds (0-2, 3-5, ...): how often BC with the package's actor is at or above d3rlpy's BC.
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+
+import numpy as np
+
+from sb3_pola.grid.report import fmt_rates, fmt_scores
+from sb3_pola.grid.rows import read_rows
+
+HERE = pathlib.Path(__file__).resolve().parent
+STEPS = 10_000
+DATASET = "pointmaze/umaze-v0"
+METHODS = {
+    "BC, package actor": (HERE / "bc_scores.csv", "BC"),
+    "d3rlpy BC": (HERE / "peers.csv", "d3rlpy-BC"),
+}
+
+
+def finals(path: pathlib.Path, variant: str, column: str = "score") -> dict[int, float]:
+    """``{seed: value}`` of the final evaluations of a variant."""
+    rows = read_rows(path)
+    return {
+        r["seed"]: float(r[column]) for r in rows if r["dataset"] == DATASET and r["variant"] == variant and r["step"] == STEPS
+    }
+
+
+def main() -> None:
+    scores = {name: finals(*source) for name, source in METHODS.items()}
+    success = {name: finals(*source, column="success") for name, source in METHODS.items()}
+    seeds = sorted(set.intersection(*(set(s) for s in scores.values())))
+    if not seeds:
+        raise SystemExit("no seed has both methods' final evaluations: run experiments/umaze_floor40/run.sh first")
+    arrays = {name: np.array([s[seed] for seed in seeds]) for name, s in scores.items()}
+    print(f"{DATASET}, {STEPS} steps, 10 episodes, seeds {seeds[0]}-{seeds[-1]} ({len(seeds)})\n")
+    print("| method | seeds in order | mean ± std | success | seeds 0-2 |")
+    print("|---|---|---|---|---|")
+    for name, values in arrays.items():
+        every = ", ".join(f"{v:.1f}" for v in values)
+        rates = [success[name][seed] for seed in seeds]
+        print(f"| {name} | {every} | {fmt_scores(list(values))} | {fmt_rates(rates)} | {fmt_scores(list(values[:3]))} |")
+
+    ours, theirs = arrays["BC, package actor"], arrays["d3rlpy BC"]
+    diff = ours.mean() - theirs.mean()
+    se = math.sqrt(ours.var(ddof=1) / len(ours) + theirs.var(ddof=1) / len(theirs))
+    rng = np.random.default_rng(0)
+    boot = [rng.choice(ours, len(ours)).mean() - rng.choice(theirs, len(theirs)).mean() for _ in range(10_000)]
+    low, high = np.percentile(boot, [2.5, 97.5])
+    print(
+        f"\npackage - d3rlpy: {diff:+.1f} (Welch's standard error {se:.1f}; "
+        f"95% bootstrap interval over seeds {low:+.1f} to {high:+.1f})"
+    )
+    triples = [seeds[i : i + 3] for i in range(0, len(seeds) - 2, 3)]
+    met = [
+        np.mean([scores["BC, package actor"][s] for s in t]) >= np.mean([scores["d3rlpy BC"][s] for s in t]) for t in triples
+    ]
+    won = ", ".join(f"{t[0]}-{t[-1]}" for t, m in zip(triples, met, strict=True) if m) or "none"
+    print(
+        f"the done-when's 3-seed comparison on the {len(triples)} disjoint triples of seeds: the package's BC at or "
+        f"above d3rlpy's BC on {sum(met)} ({won})"
+    )
+
+
+if __name__ == "__main__":
+    main()
