@@ -62,6 +62,23 @@ VARIANTS: dict[str, dict[str, Any]] = {
 }
 # the same with the package's weight average of the actor (ema_decay 0.995)
 VARIANTS |= {f"{name}-ema": {**VARIANTS[name], "ema": 0.995} for name in ("mse-d3rlpy", "x0-lr1e-3")}
+# d3rlpy BC's network pieces one at a time on the package's diffusion actor (``x0-lr1e-3`` plus the piece; the width,
+# raw states and no products have rows above), and d3rlpy's network under the diffusion loss less one piece
+D3RLPY_PIECES: dict[str, dict[str, Any]] = {
+    "256": {"arch": [256, 256]},
+    "relu": {"relu": True},
+    "raw": {"raw": True},
+    "noprod": {"products": False},
+}
+VARIANTS["x0-lr1e-3-relu"] = {"prediction_type": "sample", "lr": 1e-3, "relu": True}
+VARIANTS |= {
+    f"x0-d3rlpy-but-{left_out}": {
+        "prediction_type": "sample",
+        "lr": 1e-3,
+        **{k: v for piece, cfg in D3RLPY_PIECES.items() if piece != left_out for k, v in cfg.items()},
+    }
+    for left_out in D3RLPY_PIECES
+}
 
 
 def build(cfg: dict[str, Any], extractor: StateProductsExtractor, act_dim: int) -> tuple[nn.Module, Callable, Callable]:
