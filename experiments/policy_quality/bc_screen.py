@@ -71,6 +71,10 @@ D3RLPY_PIECES: dict[str, dict[str, Any]] = {
     "noprod": {"products": False},
 }
 VARIANTS["x0-lr1e-3-relu"] = {"prediction_type": "sample", "lr": 1e-3, "relu": True}
+# the two pieces whose removal from d3rlpy's network costs the U-maze (twenty-seventh pass), with the package's
+# width and state normalisation, with and without the weight average
+VARIANTS["x0-lr1e-3-relu-noprod"] = {"prediction_type": "sample", "lr": 1e-3, "relu": True, "products": False}
+VARIANTS["x0-lr1e-3-relu-noprod-ema"] = {**VARIANTS["x0-lr1e-3-relu-noprod"], "ema": 0.995}
 VARIANTS |= {
     f"x0-d3rlpy-but-{left_out}": {
         "prediction_type": "sample",
