@@ -7,7 +7,7 @@ import zipfile
 
 import gymnasium as gym
 import pytest
-from soak import make_light_model
+from soak import LIGHT_CONFIG, make_light_model
 
 from sb3_pola.common.integrity import ModelFileError
 from sb3_pola.pola.pola import POLA
@@ -83,3 +83,22 @@ def test_check_finite_freq_is_a_saved_hyperparameter(tiny_dataset: str, tmp_path
     assert POLA.load(tmp_path / "model.zip", device="cpu").check_finite_freq == 7
     with pytest.raises(ValueError, match="check_finite_freq"):
         make_model(tiny_dataset, check_finite_freq=-1)
+
+
+def test_actor_activation_is_the_actors_own_and_saved(tiny_dataset: str, tmp_path: pathlib.Path) -> None:
+    from torch import nn
+
+    def kinds(module: nn.Module) -> set[type]:
+        return {type(m) for m in module.modules()}
+
+    assert nn.ReLU not in kinds(make_model(tiny_dataset).policy.actor)  # the default: activation_fn for both
+    policy_kwargs = {**LIGHT_CONFIG.get("policy_kwargs", {}), "actor_activation_fn": nn.ReLU}
+    model = make_model(tiny_dataset, policy_kwargs=policy_kwargs).learn(3)
+    assert nn.ReLU in kinds(model.policy.actor) and nn.Mish not in kinds(model.policy.actor)
+    assert nn.ReLU in kinds(model.policy.actor_ema)
+    assert nn.ReLU not in kinds(model.policy.critic)  # the critics keep activation_fn
+    model.save(tmp_path / "model.zip")
+    loaded = POLA.load(tmp_path / "model.zip", device="cpu")
+    assert nn.ReLU in kinds(loaded.policy.actor) and nn.ReLU not in kinds(loaded.policy.critic)
+    obs = model.policy.observation_space.sample()[None]
+    assert (model.predict(obs, deterministic=True)[0] == loaded.predict(obs, deterministic=True)[0]).all()

@@ -5,7 +5,7 @@ model under several rules of ``predict`` (10 episodes each, the score protocol's
         --kwargs '{"eta": 0.0, "rollout_length": 0}' [--seed 0] [--rules noisefree,obsnoise,sample,best10]
 
 ``--kwargs`` is JSON of POLA arguments over the preset's sizes; ``"lr_cos": X`` sets ``learning_rate`` to a cosine
-decay from X; ``"policy_kwargs": {"activation_fn": "ReLU"}`` names a ``torch.nn`` activation and
+decay from X; ``"policy_kwargs": {"activation_fn": "ReLU"}`` (or ``"actor_activation_fn"``) names a ``torch.nn`` activation and
 ``"optimizer_class": "AdamW"`` a ``torch.optim`` optimizer (actor and critics). ``--raw-states`` trains on the
 states as recorded (the state normalisation set to mean 0, std 1, as d3rlpy's BC sees them; not a package option).
 ``--actor-layer-norm`` / ``--actor-dropout P`` put a LayerNorm after each hidden linear layer of the actor / a
@@ -154,8 +154,9 @@ def main() -> None:
     if args.eta_after:
         kwargs["eta"] = eta_step(float(kwargs.get("eta", pola_defaults(["eta"])["eta"])), *args.eta_after)
     policy_kwargs = {"net_arch": [128, 128], **kwargs.pop("policy_kwargs", {})}
-    if isinstance(policy_kwargs.get("activation_fn"), str):
-        policy_kwargs["activation_fn"] = getattr(th.nn, policy_kwargs["activation_fn"])
+    for key in ("activation_fn", "actor_activation_fn"):
+        if isinstance(policy_kwargs.get(key), str):
+            policy_kwargs[key] = getattr(th.nn, policy_kwargs[key])
     if isinstance(policy_kwargs.get("optimizer_class"), str):
         policy_kwargs["optimizer_class"] = getattr(th.optim, policy_kwargs["optimizer_class"])
     data = load_offline_dataset(args.dataset)

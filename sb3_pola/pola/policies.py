@@ -47,6 +47,9 @@ class POLAPolicy(BasePolicy):
     :param lr_schedule: learning-rate schedule (actor and critic)
     :param net_arch: hidden sizes, a list for both or ``dict(pi=[...], qf=[...])`` (default 3 x 256 each)
     :param activation_fn: activation of actor and critics (Mish, as Diffusion-QL)
+    :param actor_activation_fn: the actor's own activation (``None``: ``activation_fn``). ReLU without the state
+        products is d3rlpy BC's piecewise-linear network: on the U-maze it imitates no better offline but acts better
+        where the data never go (docs/results.md, #23's twenty-seventh pass)
     :param n_critics: critic ensemble size ``N`` (paper: 10)
     :param n_diffusion_steps: denoising steps of the actor (paper and Diffusion-QL: 5)
     :param beta_schedule: noise schedule, ``"vp"``, ``"linear"`` or ``"cosine"``
@@ -82,6 +85,7 @@ class POLAPolicy(BasePolicy):
         lr_schedule: Schedule,
         net_arch: list[int] | dict[str, list[int]] | None = None,
         activation_fn: type[nn.Module] = nn.Mish,
+        actor_activation_fn: type[nn.Module] | None = None,
         n_critics: int = 10,
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
@@ -129,6 +133,7 @@ class POLAPolicy(BasePolicy):
         self.deterministic_rule = deterministic_rule
         self.net_arch = net_arch
         self.activation_fn = activation_fn
+        self.actor_activation_fn = actor_activation_fn
         self.n_critics = n_critics
         self.n_diffusion_steps = n_diffusion_steps
         self.beta_schedule = beta_schedule
@@ -142,6 +147,7 @@ class POLAPolicy(BasePolicy):
         self.dynamics_kwargs = dynamics_kwargs
         self.compile_activations = compile_activations
         net_activation = fused_activation(activation_fn) if compile_activations else activation_fn
+        actor_activation = activation_fn if actor_activation_fn is None else actor_activation_fn
         action_dim = int(np.prod(action_space.shape))
         obs_dim = int(np.prod(observation_space.shape))
 
@@ -153,7 +159,7 @@ class POLAPolicy(BasePolicy):
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             time_embedding_dim=time_embedding_dim,
-            activation_fn=net_activation,
+            activation_fn=fused_activation(actor_activation) if compile_activations else actor_activation,
             prediction_type=prediction_type,
         )
         self.actor_ema = copy.deepcopy(self.actor).requires_grad_(False)
@@ -179,6 +185,7 @@ class POLAPolicy(BasePolicy):
         data.update(
             net_arch=self.net_arch,
             activation_fn=self.activation_fn,
+            actor_activation_fn=self.actor_activation_fn,
             n_critics=self.n_critics,
             n_diffusion_steps=self.n_diffusion_steps,
             beta_schedule=self.beta_schedule,
