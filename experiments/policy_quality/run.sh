@@ -783,3 +783,22 @@ done
 #   HC=<shared datasets> MAZE=<medium maze folder> ROOT=<folder> bash experiments/critics10/run.sh
 #   python experiments/critics10/timing.py; python experiments/critics10/timing.py --eager
 #   python experiments/critics10/table.py
+# --- twenty-seventh pass (stop 54): the U-maze's imitation floor over 40 seeds and where its gap comes from
+# (experiments/umaze_floor40/, PART=bc / peers / pieces as its header says), then the actor's network from it in POLA:
+# ReLU for the actor alone, no state products, the actor 2 x 256 (critics 2 x 128 as the preset), rows "RNW" (POLA) and
+# "BCRNW" (BC); "BCDEF" is the defaults' BC through this script, 48.6 at seed 0 as sb3-pola score's. Medium maze,
+# hopper (the SEED=0 file) and halfcheetah through MINARI_DATASETS_PATH.
+RNW='"compile_update": true, "use_state_products": false, "policy_kwargs": {"actor_activation_fn": "ReLU", "net_arch": {"pi": [256, 256], "qf": [128, 128]}}'
+screen --dataset pointmaze/umaze-v0 --seed 0 --rules obsnoise --name BCDEF --kwargs '{"compile_update": true, "eta": 0.0, "rollout_length": 0}'
+for s in 0 1 2 3 4; do
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --rules obsnoise --name BCRNW --kwargs "{$RNW, \"eta\": 0.0, \"rollout_length\": 0}"
+done
+for s in 0 1 2; do
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0 hopper/medium-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name RNW --kwargs "{$RNW}"
+  done
+  for d in pointmaze/medium-v0 hopper/medium-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name BCRNW --kwargs "{$RNW, \"eta\": 0.0, \"rollout_length\": 0}"
+  done
+done
+for s in 0 1; do screen --dataset halfcheetah/medium-v0 --seed "$s" --rules obsnoise --name RNW --kwargs "{$RNW}"; done
