@@ -802,3 +802,5 @@ for s in 0 1 2; do
   done
 done
 for s in 0 1; do screen --dataset halfcheetah/medium-v0 --seed "$s" --rules obsnoise --name RNW --kwargs "{$RNW}"; done
+screen --dataset halfcheetah/medium-replay-v0 --seed 0 --rules obsnoise --name RNW --kwargs "{$RNW}"
+screen --dataset hopper/medium-replay-v0 --seed 0 --rules obsnoise --name RNW --kwargs "{$RNW}"
