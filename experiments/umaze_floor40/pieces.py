@@ -4,8 +4,8 @@
 
 Reads ``pieces.jsonl`` kept here (``PART=pieces bash experiments/umaze_floor40/run.sh``: each imitator of
 ``experiments/policy_quality/bc_screen.py`` trained in one loop and played on the score's 10 resets) and prints one
-markdown row per imitator: its pieces, the seeds, mean ± sample std, the standard error of the mean, the held-out
-action MSE (the noise-free chain), sorted by the mean.
+markdown row per imitator: its pieces (read from ``bc_screen.VARIANTS``), the seeds, mean ± sample std, the standard
+error of the mean, the held-out action MSE (the noise-free chain), sorted by the mean.
 """
 
 from __future__ import annotations
@@ -14,29 +14,26 @@ import collections
 import json
 import math
 import pathlib
+import sys
 
 import numpy as np
 
 HERE = pathlib.Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "policy_quality"))
+from bc_screen import VARIANTS  # noqa: E402  (the imitators' configs, the one source of each row's pieces)
 
-# variant -> (loss, activation, width, states, products, weight average)
-PIECES: dict[str, tuple[str, ...]] = {
-    "mse-d3rlpy": ("MSE", "ReLU", "256", "raw", "no", "no"),
-    "x0-256-lr1e-3-relu-raw-noprod": ("diffusion", "ReLU", "256", "raw", "no", "no"),
-    "x0-d3rlpy-but-256": ("diffusion", "ReLU", "128", "raw", "no", "no"),
-    "x0-d3rlpy-but-raw": ("diffusion", "ReLU", "256", "normalised", "no", "no"),
-    "x0-d3rlpy-but-relu": ("diffusion", "Mish", "256", "raw", "no", "no"),
-    "x0-d3rlpy-but-noprod": ("diffusion", "ReLU", "256", "raw", "yes", "no"),
-    "x0-lr1e-3-relu-noprod": ("diffusion", "ReLU", "128", "normalised", "no", "no"),
-    "x0-lr1e-3-relu-noprod-ema": ("diffusion", "ReLU", "128", "normalised", "no", "yes"),
-    "mse-lr1e-3": ("MSE", "Mish", "128", "normalised", "yes", "no"),
-    "x0-lr1e-3-relu": ("diffusion", "ReLU", "128", "normalised", "yes", "no"),
-    "x0-lr1e-3-noprod": ("diffusion", "Mish", "128", "normalised", "no", "no"),
-    "x0-256-lr1e-3": ("diffusion", "Mish", "256", "normalised", "yes", "no"),
-    "x0-lr1e-3-raw": ("diffusion", "Mish", "128", "raw", "yes", "no"),
-    "x0-lr1e-3": ("diffusion", "Mish", "128", "normalised", "yes", "no"),
-    "x0-lr1e-3-ema": ("diffusion", "Mish", "128", "normalised", "yes", "yes"),
-}
+
+def pieces(variant: str) -> tuple[str, ...]:
+    """(loss, activation, width, states, products, weight average) of a ``bc_screen.py`` variant, from its config."""
+    cfg = VARIANTS[variant]
+    return (
+        "MSE" if cfg.get("kind") == "mse" else "diffusion",
+        "ReLU" if cfg.get("relu") else "Mish",
+        str(cfg.get("arch", [128, 128])[0]),  # bc_screen's default width
+        "raw" if cfg.get("raw") else "normalised",
+        "yes" if cfg.get("products", True) else "no",
+        "yes" if "ema" in cfg else "no",
+    )
 
 
 def main() -> None:
@@ -49,17 +46,15 @@ def main() -> None:
     print("| " + " | ".join([*header, "seeds", "score", "s.e.", "held-out MSE"]) + " |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     table = []
-    for variant, pieces in PIECES.items():
-        if not rows[variant]:
-            continue
+    for variant in rows:
         scores = np.array([r["score"] for r in rows[variant].values()])
         mse = np.mean([r["mse_det"] for r in rows[variant].values()])
         seeds = sorted(rows[variant])
-        table.append((scores.mean(), variant, pieces, seeds, scores, mse))
-    for mean, variant, pieces, seeds, scores, mse in sorted(table, key=lambda t: -t[0]):
+        table.append((scores.mean(), variant, pieces(variant), seeds, scores, mse))
+    for mean, variant, columns, seeds, scores, mse in sorted(table, key=lambda t: -t[0]):
         std = scores.std(ddof=1)
         print(
-            f"| `{variant}` | {' | '.join(pieces)} | {seeds[0]}-{seeds[-1]} ({len(seeds)}) | {mean:.1f} ± {std:.1f} "
+            f"| `{variant}` | {' | '.join(columns)} | {seeds[0]}-{seeds[-1]} ({len(seeds)}) | {mean:.1f} ± {std:.1f} "
             f"| {std / math.sqrt(len(scores)):.1f} | {mse:.4f} |"
         )
 

@@ -15,7 +15,7 @@ import pathlib
 
 import numpy as np
 
-from sb3_pola.grid.report import fmt_rates, fmt_scores
+from sb3_pola.grid.report import fmt_rates, fmt_scores, summarize
 from sb3_pola.grid.rows import read_rows
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -27,17 +27,22 @@ METHODS = {
 }
 
 
-def finals(path: pathlib.Path, variant: str, column: str = "score") -> dict[int, float]:
-    """``{seed: value}`` of the final evaluations of a variant."""
-    rows = read_rows(path)
-    return {
-        r["seed"]: float(r[column]) for r in rows if r["dataset"] == DATASET and r["variant"] == variant and r["step"] == STEPS
-    }
+def finals(path: pathlib.Path, variant: str) -> tuple[dict[int, float], dict[int, float]]:
+    """``{seed: score}`` and ``{seed: success rate}`` of the runs of a variant that reached ``STEPS``."""
+    entry = summarize(read_rows(path)).get((DATASET, variant))
+    if entry is None:
+        return {}, {}
+    done = [i for i, step in enumerate(entry["steps"]) if step == STEPS]
+    return (
+        {entry["seeds"][i]: entry["final"][i] for i in done},
+        {entry["seeds"][i]: entry["success"][i] for i in done},
+    )
 
 
 def main() -> None:
-    scores = {name: finals(*source) for name, source in METHODS.items()}
-    success = {name: finals(*source, column="success") for name, source in METHODS.items()}
+    scores, success = {}, {}
+    for name, source in METHODS.items():
+        scores[name], success[name] = finals(*source)
     seeds = sorted(set.intersection(*(set(s) for s in scores.values())))
     if not seeds:
         raise SystemExit("no seed has both methods' final evaluations: run experiments/umaze_floor40/run.sh first")
