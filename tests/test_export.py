@@ -61,11 +61,13 @@ def model(request, models: dict[str, POLA]) -> POLA:
 
 @pytest.fixture(scope="module")
 def observations(models: dict[str, POLA]) -> np.ndarray:
-    """Dataset observations and observations outside the data (3 standard deviations, clipped actions), float32."""
+    """Dataset observations and observations outside the data (3 and 30 standard deviations: clipped actions for
+    the actor on the products and for the one on the raw state), float32."""
     model = next(iter(models.values()))  # all on the same dataset
     data = model._offline_data.observations[:40]
     mean, std = model._offline_data.obs_stats()
-    far = mean + 3.0 * std * np.random.default_rng(0).standard_normal((24, data.shape[1]))
+    noise = np.random.default_rng(0).standard_normal((24, data.shape[1]))
+    far = mean + np.where(np.arange(24)[:, None] < 16, 3.0, 30.0) * std * noise
     return np.concatenate([data, far]).astype(np.float32)
 
 
@@ -84,7 +86,8 @@ def _session(path: pathlib.Path):
 def test_graph_has_the_predict_actor_and_its_steps(model: POLA):
     graph = DeterministicPolicyGraph(model.policy)
     assert graph.n_diffusion_steps == model.policy.n_diffusion_steps
-    assert graph.use_state_products
+    assert graph.use_state_products == model.policy.use_state_products  # light: the defaults' raw state; paper: products
+    assert {type(m) for m in graph.activations} == {th.nn.Mish if model.policy.use_state_products else th.nn.ReLU}
     assert th.equal(graph.obs_mean, model.policy.features_extractor.obs_mean)
     assert not th.equal(model.policy.actor_ema.input_layer.weight, model.actor.input_layer.weight)  # the fixture differs them
 

@@ -305,6 +305,7 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "lookahead_fixed_goal": False,
         "goal_switches": None,
         "hindsight_goals": False,
+        "use_state_products": True,
     }
     # the Q term at the paper's strength, bounded by LayerNorm critics (#23; #12's weakened form stays an option)
     shared = {"lookahead_normalization", "q_scale_floor"}
@@ -324,6 +325,10 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
     assert default.learning_rate == 1e-3 and default.lr_schedule(0.0) == pytest.approx(1e-3)
     assert default.policy.deterministic_rule == "observation_noise"
     assert default.goal_switches == "relabel"  # #23's fourteenth pass (None before)
+    # #23's twenty-eighth pass: the actor on the raw state with ReLU; the paper's on the products with Mish
+    kinds = {type(m) for m in default.actor.modules()}, {type(m) for m in paper.actor.modules()}
+    assert not default.policy.use_state_products and th.nn.ReLU in kinds[0]
+    assert paper.policy.use_state_products and th.nn.ReLU not in kinds[1]
     assert default.policy.dynamics is not None and default.policy.dynamics.mean_loss == "beta_nll"
     # in the update: the similarity term is on by default, off in the paper's form
     for model, on in ((default, True), (paper, False)):

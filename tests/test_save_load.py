@@ -91,7 +91,12 @@ def test_actor_activation_is_the_actors_own_and_saved(tiny_dataset: str, tmp_pat
     def kinds(module: nn.Module) -> set[type]:
         return {type(m) for m in module.modules()}
 
-    assert nn.ReLU not in kinds(make_model(tiny_dataset).policy.actor)  # the default: activation_fn for both
+    # the default (#23): the raw state and ReLU; with the paper's products, the critics' activation_fn
+    default = make_model(tiny_dataset).policy
+    assert not default.use_state_products and nn.ReLU in kinds(default.actor) and nn.ReLU in kinds(default.actor_ema)
+    assert nn.ReLU not in kinds(make_model(tiny_dataset, use_state_products=True).policy.actor)
+    mish = {**LIGHT_CONFIG.get("policy_kwargs", {}), "actor_activation_fn": nn.Mish}
+    assert nn.ReLU not in kinds(make_model(tiny_dataset, policy_kwargs=mish).policy.actor)  # named: kept
     policy_kwargs = {**LIGHT_CONFIG.get("policy_kwargs", {}), "actor_activation_fn": nn.ReLU}
     model = make_model(tiny_dataset, policy_kwargs=policy_kwargs).learn(3)
     assert nn.ReLU in kinds(model.policy.actor) and nn.Mish not in kinds(model.policy.actor)

@@ -180,8 +180,10 @@ def plot_curves(rows: list[dict[str, Any]], out: pathlib.Path) -> list[pathlib.P
         "T1": "tab:orange",
         "T3": "tab:red",
         "T5": "tab:green",
-        "T3-noproducts": "tab:cyan",
-        "T0-noproducts": "tab:olive",
+        "T3-products": "tab:cyan",
+        "T0-products": "tab:olive",
+        "T3-noproducts": "tab:pink",
+        "T0-noproducts": "tab:brown",
         "T3-criticproducts": "tab:purple",
         "BC": "tab:gray",
     }

@@ -27,16 +27,24 @@ VARIANTS: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     "T1": ("POLA T=1", {"rollout_length": 1}, {}),
     "T3": ("POLA T=3", {"rollout_length": 3}, {}),
     "T5": ("POLA T=5", {"rollout_length": 5}, {}),
+    # the actor on the state's products (paper section V, with the critics' Mish); the default since #23 is the raw state
+    "T0-products": ("T=0, products in the actor", {"rollout_length": 0, "use_state_products": True}, {}),
+    "T3-products": ("T=3, products in the actor", {"rollout_length": 3, "use_state_products": True}, {}),
+    "T3-criticproducts": (
+        "T=3, products in actor and critic",
+        {"rollout_length": 3, "use_state_products": True},
+        {"critic_state_products": True},
+    ),
+    # the raw state named explicitly: T0 and T3 themselves since #23 (kept for the folders made before it)
     "T0-noproducts": ("T=0, no products", {"rollout_length": 0, "use_state_products": False}, {}),
     "T3-noproducts": ("T=3, no products", {"rollout_length": 3, "use_state_products": False}, {}),
-    "T3-criticproducts": ("T=3, products in actor and critic", {"rollout_length": 3}, {"critic_state_products": True}),
     "BC": ("BC (diffusion actor, eta=0)", {"rollout_length": 0, "eta": 0.0}, {}),
 }
 ALL_VARIANTS = list(VARIANTS)
 # the variants of each figure (paper Fig. 3 and Fig. 4); BC is drawn in both as the floor
 FIGURES: dict[str, list[str]] = {
     "rollout": ["T0", "T1", "T3", "T5", "BC"],
-    "products": ["T3", "T3-noproducts", "T3-criticproducts", "T0", "T0-noproducts", "BC"],
+    "products": ["T3", "T3-products", "T3-criticproducts", "T0", "T0-products", "BC"],
 }
 # POLA's numbers in the paper's Table I (D4RL MuJoCo v2, mean +- std over 10 replications)
 PAPER_TABLE_I: dict[tuple[str, str], str] = {
@@ -81,7 +89,7 @@ class Config:
     :param eval_freq: gradient steps between evaluations
     :param eval_episodes: episodes per evaluation
     :param batch_size: minibatch size
-    :param net_arch: hidden sizes of actor and critics
+    :param net_arch: hidden sizes of actor and critics, a list for both or ``dict(pi=[...], qf=[...])``
     :param n_critics: critic ensemble size ``N``
     :param top_k: ``K`` smallest Q-values averaged in the policy loss
     :param n_action_samples: candidate actions per state at evaluation (picked by the critic)
@@ -101,7 +109,7 @@ class Config:
     eval_freq: int
     eval_episodes: int
     batch_size: int = 256
-    net_arch: list[int] = field(default_factory=lambda: [256, 256, 256])
+    net_arch: list[int] | dict[str, list[int]] = field(default_factory=lambda: [256, 256, 256])
     n_critics: int = 10
     top_k: int = 2
     n_action_samples: int = 1
@@ -146,15 +154,16 @@ def pola_defaults(keys: Any) -> dict[str, Any]:
 
 
 PRESETS: dict[str, Config] = {
-    # a CPU core per cell: light nets, small ensemble, the main job's dynamics model, a short budget, the
-    # compiled update (faster per step for the look-ahead variants; the first step compiles for minutes)
+    # a CPU core per cell: light critics, small ensemble, the main job's dynamics model, a short budget, the
+    # compiled update (faster per step for the look-ahead variants; the first step compiles for minutes); the actor
+    # 2 x 256 as d3rlpy's BC (on the raw state it costs less than 2 x 128 on the products of a 17-dim state)
     "cpu": Config(
         preset="cpu",
         steps=10_000,
         eval_freq=2000,
         eval_episodes=10,
         batch_size=128,
-        net_arch=[128, 128],
+        net_arch={"pi": [256, 256], "qf": [128, 128]},
         n_critics=5,
         top_k=2,
         n_action_samples=1,
@@ -179,7 +188,7 @@ PRESETS: dict[str, Config] = {
     ),
 }
 DEFAULT_DATASETS = ["halfcheetah/medium-v0", "halfcheetah/medium-replay-v0"]
-DEFAULT_VARIANTS = ["T0", "T1", "T3", "T5", "T3-noproducts", "T3-criticproducts", "BC"]
+DEFAULT_VARIANTS = ["T0", "T1", "T3", "T5", "T3-products", "T3-criticproducts", "BC"]
 
 
 def resolve_device(device: str) -> str:

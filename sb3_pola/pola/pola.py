@@ -62,7 +62,8 @@ CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
 DEFAULT_LEARNING_RATE = 1e-3  # constant, as SB3: a cosine decay to 0 over a short budget starved the Q term (#23)
 GRADIENT_RATIO_FREQ = 100  # gradient steps between two measurements of train/q_bc_grad_ratio
 # the paper's form (eq. 3/4 as written, Diffusion-QL's divisor, no ensemble-similarity term, the actor's gradient
-# through the model, the DDPM noise target of eq. 6, Diffusion-QL's learning rate 3e-4): POLA(..., **PAPER_FORM);
+# through the model, the DDPM noise target of eq. 6, Diffusion-QL's learning rate 3e-4, the actor on the state's
+# pairwise products of section V, with the critics' Mish): POLA(..., **PAPER_FORM);
 # the defaults depart from it (docstring)
 PAPER_FORM: dict[str, Any] = {
     "eta": 1.0,
@@ -80,6 +81,7 @@ PAPER_FORM: dict[str, Any] = {
     "lookahead_fixed_goal": False,
     "goal_switches": None,
     "hindsight_goals": False,
+    "use_state_products": True,
 }
 
 
@@ -407,7 +409,9 @@ class POLA(OfflineAlgorithm):
     :param beta_schedule: noise schedule: ``"vp"`` (default), ``"linear"`` or ``"cosine"``
     :param prediction_type: the actor network's target: ``"epsilon"``, the noise (eq. 6 as written), or
         ``"sample"``, the clean action (:class:`~sb3_pola.pola.policies.DiffusionActor`)
-    :param use_state_products: give the actor the pairwise state products (section V)
+    :param use_state_products: give the actor the pairwise state products (section V; default ``False``: the raw
+        state, with a ReLU actor unless ``policy_kwargs`` names its ``actor_activation_fn``. On the mazes this actor
+        lifts POLA well above the paper's, on locomotion it is level; docs/results.md, #23's twenty-eighth pass)
     :param critic_learning_rate: the critics' own learning rate, a float or a schedule, as d3rlpy's
         ``critic_learning_rate`` (``None``, the default: ``learning_rate``, as SB3)
     :param bc_learning_rate: the behaviour-cloning term's own rate in the actor's step, a float or a schedule
@@ -498,7 +502,7 @@ class POLA(OfflineAlgorithm):
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
         prediction_type: str = "sample",
-        use_state_products: bool = True,
+        use_state_products: bool = False,
         critic_learning_rate: float | Schedule | None = None,
         bc_learning_rate: float | Schedule | None = None,
         bc_weight_temp: float | None = None,

@@ -47,15 +47,18 @@ class POLAPolicy(BasePolicy):
     :param lr_schedule: learning-rate schedule (actor and critic)
     :param net_arch: hidden sizes, a list for both or ``dict(pi=[...], qf=[...])`` (default 3 x 256 each)
     :param activation_fn: activation of actor and critics (Mish, as Diffusion-QL)
-    :param actor_activation_fn: the actor's own activation (``None``: ``activation_fn``). ReLU without the state
-        products is d3rlpy BC's piecewise-linear network: on the U-maze it imitates no better offline but acts better
-        where the data never go (docs/results.md, #23's twenty-seventh pass)
+    :param actor_activation_fn: the actor's own activation. ``None``: ReLU for an actor on the raw state (the
+        default, ``use_state_products=False``), ``activation_fn`` for one on the state products (the paper's form).
+        ReLU without the products is d3rlpy BC's piecewise-linear network: it imitates no better offline but acts
+        better where the data never go; either piece alone gains little (docs/results.md, #23's twenty-seventh and
+        twenty-eighth passes). The resolved class is what the model saves
     :param n_critics: critic ensemble size ``N`` (paper: 10)
     :param n_diffusion_steps: denoising steps of the actor (paper and Diffusion-QL: 5)
     :param beta_schedule: noise schedule, ``"vp"``, ``"linear"`` or ``"cosine"``
     :param prediction_type: the actor network's target, ``"epsilon"`` (the noise) or ``"sample"`` (the clean
         action; :class:`DiffusionActor`)
-    :param use_state_products: feed the actor ``s_new`` = state + all ``X_i X_j, i < j`` (paper section V)
+    :param use_state_products: feed the actor ``s_new`` = state + all ``X_i X_j, i < j`` (paper section V; the
+        package default is the raw state, #23)
     :param critic_state_products: also give the critics the products (the paper reports this hurts)
     :param critic_layer_norm: LayerNorm in the critics' hidden layers, which bounds Q off the data (ReBRAC, RLPD)
     :param time_embedding_dim: size of the diffusion-step embedding
@@ -90,7 +93,7 @@ class POLAPolicy(BasePolicy):
         n_diffusion_steps: int = 5,
         beta_schedule: str = "vp",
         prediction_type: str = "epsilon",
-        use_state_products: bool = True,
+        use_state_products: bool = False,
         critic_state_products: bool = False,
         critic_layer_norm: bool = False,
         time_embedding_dim: int = 16,
@@ -133,6 +136,8 @@ class POLAPolicy(BasePolicy):
         self.deterministic_rule = deterministic_rule
         self.net_arch = net_arch
         self.activation_fn = activation_fn
+        if actor_activation_fn is None:
+            actor_activation_fn = activation_fn if use_state_products else nn.ReLU
         self.actor_activation_fn = actor_activation_fn
         self.n_critics = n_critics
         self.n_diffusion_steps = n_diffusion_steps
@@ -147,7 +152,6 @@ class POLAPolicy(BasePolicy):
         self.dynamics_kwargs = dynamics_kwargs
         self.compile_activations = compile_activations
         net_activation = fused_activation(activation_fn) if compile_activations else activation_fn
-        actor_activation = activation_fn if actor_activation_fn is None else actor_activation_fn
         action_dim = int(np.prod(action_space.shape))
         obs_dim = int(np.prod(observation_space.shape))
 
@@ -159,7 +163,7 @@ class POLAPolicy(BasePolicy):
             n_diffusion_steps=n_diffusion_steps,
             beta_schedule=beta_schedule,
             time_embedding_dim=time_embedding_dim,
-            activation_fn=fused_activation(actor_activation) if compile_activations else actor_activation,
+            activation_fn=fused_activation(actor_activation_fn) if compile_activations else actor_activation_fn,
             prediction_type=prediction_type,
         )
         self.actor_ema = copy.deepcopy(self.actor).requires_grad_(False)
