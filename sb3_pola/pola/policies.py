@@ -51,7 +51,7 @@ class POLAPolicy(BasePolicy):
         default, ``use_state_products=False``), ``activation_fn`` for one on the state products (the paper's form).
         ReLU without the products is d3rlpy BC's piecewise-linear network: it imitates no better offline but acts
         better where the data never go; either piece alone gains little (docs/results.md, #23's twenty-seventh and
-        twenty-eighth passes). The resolved class is what the model saves
+        twenty-eighth passes). The policy's own ``save`` names the resolved class
     :param n_critics: critic ensemble size ``N`` (paper: 10)
     :param n_diffusion_steps: denoising steps of the actor (paper and Diffusion-QL: 5)
     :param beta_schedule: noise schedule, ``"vp"``, ``"linear"`` or ``"cosine"``
