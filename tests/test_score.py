@@ -9,6 +9,7 @@ import pathlib
 
 import numpy as np
 import pytest
+import torch as th
 from helpers import TINY_GRID
 
 from sb3_pola.cli import score as score_cli
@@ -170,6 +171,24 @@ def test_extra_policy_kwargs_reach_the_policy(score_data: pathlib.Path) -> None:
     model = grid_cell.new_cell_model("T0", 0, config, "test/pendulum-v0", "cpu")
     assert model.policy.time_embedding_dim == 8
     assert model.policy_kwargs["net_arch"] == config.net_arch
+
+
+def test_cpu_preset_actor_is_2x256_relu_on_the_raw_state(score_data: pathlib.Path) -> None:
+    """#23's twenty-eighth pass: the CPU preset's actor 2 x 256 with ReLU on the raw state, its critics 2 x 128 with
+    Mish; the ``-products`` variants give the actor the paper's products and Mish."""
+    config = grid_variants.build_config(score_cli.parse_args(["--preset", "cpu", "--no-compile"]), "cpu")
+    assert config.net_arch == {"pi": [256, 256], "qf": [128, 128]}
+    model = grid_cell.new_cell_model("T3", 0, config, "test/pendulum-v0", "cpu")
+    actor_kinds = {type(m) for m in model.actor.modules()}
+    assert th.nn.ReLU in actor_kinds and th.nn.Mish not in actor_kinds
+    assert model.policy.features_extractor.features_dim == 3  # Pendulum's raw state
+    assert {m.out_features for m in model.actor.modules() if isinstance(m, th.nn.Linear)} >= {256}
+    assert max(m.out_features for m in model.critic.modules() if hasattr(m, "ensemble_size")) == 128
+    paper_actor = grid_cell.new_cell_model("T3-products", 0, config, "test/pendulum-v0", "cpu")
+    assert paper_actor.policy.features_extractor.features_dim == 3 + 3
+    assert th.nn.ReLU not in {type(m) for m in paper_actor.actor.modules()}
+    both = grid_cell.new_cell_model("T3-criticproducts", 0, config, "test/pendulum-v0", "cpu")
+    assert both.policy.features_extractor.features_dim == both.critic.features_extractor.features_dim == 6
 
 
 def test_cells_keep_statistics_and_models_and_reevaluate(score_data: pathlib.Path, tmp_path: pathlib.Path) -> None:
