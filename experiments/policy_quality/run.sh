@@ -16,7 +16,9 @@ mkdir -p "$OUT"
 # form at the light sizes: the lines before it set `"target_q_floor": null, "critic_init_value": null` and
 # `--config light-paper` for that reason (`--config light` was `--config defaults` then). Since the sixteenth pass
 # (2026-12-05) the defaults add hindsight copies of the mazes' goal segments for the critic: the maze lines before
-# that block reproduce with '"hindsight_goals": false' added to their --kwargs (no effect on the other datasets).
+# that block reproduce with '"hindsight_goals": false' added to their --kwargs (no effect on the other datasets). Since
+# the twenty-eighth pass (2026-12-06) the actor takes the raw state through ReLU and the CPU preset's actor is 2 x 256:
+# the lines before it reproduce with '"use_state_products": true' and '"policy_kwargs": {"net_arch": [128, 128]}' added.
 ACTOR='"prediction_type": "sample", "lr_cos": 0.001, "lookahead_normalization": "weights", "q_scale_floor": "auto", "critic_layer_norm": false'
 # the imitation screen: held-out action MSE
 for d in halfcheetah/medium-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
@@ -804,3 +806,31 @@ done
 for s in 0 1; do screen --dataset halfcheetah/medium-v0 --seed "$s" --rules obsnoise --name RNW --kwargs "{$RNW}"; done
 screen --dataset halfcheetah/medium-replay-v0 --seed 0 --rules obsnoise --name RNW --kwargs "{$RNW}"
 screen --dataset hopper/medium-replay-v0 --seed 0 --rules obsnoise --name RNW --kwargs "{$RNW}"
+# --- twenty-eighth pass (stop 55): the RNW actor (now the defaults: raw state, ReLU, the CPU preset's 2 x 256 actor)
+# on all six datasets, 3 seeds: its missing seeds, BC with it, T = 0 with it ("T0RNW"), more medium-maze seeds, and the
+# third hopper file (THIRD=<the MINARI_DATASETS_PATH of experiments/hopper/files.sh's SEED=1 file>; rows "-third").
+# `sb3-pola score --preset cpu --variants T3 T0 BC` runs the same cells (the BC U-maze seed 0: 60.5 through both).
+for s in 0 1 2; do
+  for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name RNW --kwargs "{$RNW}"
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name BCRNW --kwargs "{$RNW, \"eta\": 0.0, \"rollout_length\": 0}"
+  done
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0 hopper/medium-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
+  done
+done
+for s in 5 6 7 8 9; do
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --rules obsnoise --name BCRNW --kwargs "{$RNW, \"eta\": 0.0, \"rollout_length\": 0}"
+done
+for s in 3 4 5 6 7; do
+  screen --dataset pointmaze/medium-v0 --seed "$s" --rules obsnoise --name RNW --kwargs "{$RNW}"
+  screen --dataset pointmaze/medium-v0 --seed "$s" --rules obsnoise --name BCRNW --kwargs "{$RNW, \"eta\": 0.0, \"rollout_length\": 0}"
+done
+if [ -n "${THIRD:-}" ]; then
+  for s in 0 1 2; do
+    MINARI_DATASETS_PATH="$THIRD" screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name RNW-third --kwargs "{$RNW}"
+    MINARI_DATASETS_PATH="$THIRD" screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name BCRNW-third \
+      --kwargs "{$RNW, \"eta\": 0.0, \"rollout_length\": 0}"
+  done
+fi
+# the table: python experiments/policy_quality/screen_table.py --names RNW T0RNW BCRNW RNW-third BCRNW-third --collection amd

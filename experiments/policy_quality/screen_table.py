@@ -1,0 +1,59 @@
+"""The rows of ``screen.jsonl`` (``screen.py``'s output) as a table: every seed and the mean ± std of each screen.
+
+    python experiments/policy_quality/screen_table.py --names RNW T0RNW BCRNW --collection amd
+
+One line per (dataset, name) in the file's order, seeds ascending; a seed screened twice keeps its last row.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+from typing import Any
+
+from sb3_pola.grid.report import fmt_scores
+
+HERE = pathlib.Path(__file__).resolve().parent
+
+
+def read(path: pathlib.Path, names: list[str], rule: str, collection: str | None) -> dict[tuple[str, str], dict[int, Any]]:
+    """(dataset, name) -> seed -> the row, for the rows of these names (and collection) that have the rule's score."""
+    cells: dict[tuple[str, str], dict[int, Any]] = {}
+    for line in path.read_text().splitlines():
+        row = json.loads(line)
+        if row["name"] not in names or rule not in row:
+            continue
+        if collection is not None and row.get("collection") != collection:
+            continue
+        cells.setdefault((row["dataset"], row["name"]), {})[row["seed"]] = row
+    return cells
+
+
+def table(cells: dict[tuple[str, str], dict[int, Any]], rule: str) -> str:
+    """A markdown table: dataset, name, the seeds' scores in seed order, mean ± std, the success rates if any."""
+    lines = ["| dataset | screen | seeds | scores | mean ± std | success |", "|---|---|---|---|---|---|"]
+    for (dataset, name), by_seed in cells.items():
+        seeds = sorted(by_seed)
+        scores = [by_seed[s][rule] for s in seeds]
+        success = [by_seed[s].get(f"{rule}_success") for s in seeds]
+        success_txt = ", ".join(f"{x:.1f}" for x in success if x is not None) or "-"
+        lines.append(
+            f"| {dataset} | {name} | {', '.join(map(str, seeds))} | {', '.join(f'{x:.1f}' for x in scores)} | "
+            f"{fmt_scores(scores)} | {success_txt} |"
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--file", type=pathlib.Path, default=HERE / "screen.jsonl")
+    parser.add_argument("--names", nargs="+", required=True, help="the screens' --name values")
+    parser.add_argument("--rule", default="obsnoise", help="the evaluation rule's column (screen.py --rules)")
+    parser.add_argument("--collection", default=None, help="only rows of this collection (e.g. amd)")
+    args = parser.parse_args()
+    print(table(read(args.file, args.names, args.rule, args.collection), args.rule))
+
+
+if __name__ == "__main__":
+    main()
