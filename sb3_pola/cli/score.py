@@ -8,7 +8,8 @@ dataset's env (D4RL-normalised score from the dataset's reference scores). Outpu
 - ``scores.csv``: one row per evaluation (written as it happens);
 - ``table.md``: final and best score, mean +- std over seeds, next to the paper's Table I;
 - ``fig_rollout_<dataset>.png`` (paper Fig. 3: T in {0, 1, 3, 5}) and
-  ``fig_products_<dataset>.png`` (paper Fig. 4: products on/off/in the critic), BC as the floor;
+  ``fig_products_<dataset>.png`` (paper Fig. 4: the actor on the products (``-products``) or the raw state (the
+  default), products in the critic too), BC as the floor;
 - ``config.json`` (budget, machine, date), ``cells/`` (finished cells), ``ckpt/`` (a checkpoint
   per running cell, saved at every evaluation), ``dynamics/`` (fitted dynamics models),
   ``models/`` (every finished cell's final model) and ``train/<cell>/`` (the training statistics
