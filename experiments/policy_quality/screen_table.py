@@ -37,7 +37,10 @@ def table(cells: dict[tuple[str, str], dict[int, Any]], rule: str) -> str:
         seeds = sorted(by_seed)
         scores = [by_seed[s][rule] for s in seeds]
         success = [by_seed[s].get(f"{rule}_success") for s in seeds]
-        success_txt = ", ".join(f"{x:.1f}" for x in success if x is not None) or "-"
+        known = [x for x in success if x is not None]
+        success_txt = ", ".join(f"{x:.1f}" for x in known) or "-"
+        if len(known) > 3 and len(set(known)) == 1:
+            success_txt = f"{known[0]:.1f} on every seed"
         lines.append(
             f"| {dataset} | {name} | {', '.join(map(str, seeds))} | {', '.join(f'{x:.1f}' for x in scores)} | "
             f"{fmt_scores(scores)} | {success_txt} |"
