@@ -46,7 +46,7 @@ class POLAPolicy(BasePolicy):
     :param action_space: a ``Box``
     :param lr_schedule: learning-rate schedule (actor and critic)
     :param net_arch: hidden sizes, a list for both or ``dict(pi=[...], qf=[...])`` (default 3 x 256 each)
-    :param activation_fn: activation of actor and critics (Mish, as Diffusion-QL)
+    :param activation_fn: activation of the critics, and of an actor on the state products (Mish, as Diffusion-QL)
     :param actor_activation_fn: the actor's own activation. ``None``: ReLU for an actor on the raw state (the
         default, ``use_state_products=False``), ``activation_fn`` for one on the state products (the paper's form).
         ReLU without the products is d3rlpy BC's piecewise-linear network: it imitates no better offline but acts
