@@ -832,5 +832,10 @@ if [ -n "${THIRD:-}" ]; then
     MINARI_DATASETS_PATH="$THIRD" screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name BCRNW-third \
       --kwargs "{$RNW, \"eta\": 0.0, \"rollout_length\": 0}"
   done
+  # the new actor with the products put back (ReLU, 2 x 256) on the third file
+  PRW='"compile_update": true, "use_state_products": true, "policy_kwargs": {"actor_activation_fn": "ReLU", "net_arch": {"pi": [256, 256], "qf": [128, 128]}}'
+  for s in 0 1 2; do
+    MINARI_DATASETS_PATH="$THIRD" screen --dataset hopper/medium-v0 --seed "$s" --rules obsnoise --name PRW-third --kwargs "{$PRW}"
+  done
 fi
-# the table: python experiments/policy_quality/screen_table.py --names RNW T0RNW BCRNW RNW-third BCRNW-third --collection amd
+# the table: python experiments/policy_quality/screen_table.py --names RNW T0RNW BCRNW RNW-third BCRNW-third PRW-third --collection amd
