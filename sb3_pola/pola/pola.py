@@ -411,7 +411,8 @@ class POLA(OfflineAlgorithm):
         ``"sample"``, the clean action (:class:`~sb3_pola.pola.policies.DiffusionActor`)
     :param use_state_products: give the actor the pairwise state products (section V; default ``False``: the raw
         state, with a ReLU actor unless ``policy_kwargs`` names its ``actor_activation_fn``. On the mazes this actor
-        lifts POLA well above the paper's, on locomotion it is level; docs/results.md, #23's twenty-eighth pass)
+        lifts POLA well above the paper's, on the locomotion datasets it is level, except a hopper file rich in good
+        episodes, where the products gave more; docs/results.md, #23's twenty-eighth pass)
     :param critic_learning_rate: the critics' own learning rate, a float or a schedule, as d3rlpy's
         ``critic_learning_rate`` (``None``, the default: ``learning_rate``, as SB3)
     :param bc_learning_rate: the behaviour-cloning term's own rate in the actor's step, a float or a schedule
