@@ -655,7 +655,40 @@ def test_deterministic_predict_draws_the_observations_noise():
     policy.deterministic_rule = "noise_free"
     assert th.allclose(policy._predict(obs, deterministic=True), sample_no_grad(policy.actor_ema, feats, deterministic=True))
     with pytest.raises(ValueError, match="deterministic_rule"):
-        model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule="mode")))
+        model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule="medoid")))
+
+
+def test_kernel_mode_averages_one_mode_and_picks_one_of_two():
+    from sb3_pola.pola.actor import kernel_mode
+
+    g = th.Generator().manual_seed(0)
+    unimodal = 0.3 + 0.15 * th.randn(500, 16, 3, generator=g)  # [B, K, A]
+    mode = kernel_mode(unimodal, bandwidth=0.2)
+    # nearer the centre than one sample, about as near as the samples' mean
+    assert (mode - 0.3).abs().mean() < 0.4 * (unimodal[:, 0] - 0.3).abs().mean()
+    sign = th.where(th.rand(500, 16, 1, generator=g) < 0.5, -1.0, 1.0)
+    mixture = 0.6 * sign + 0.1 * th.randn(500, 16, 3, generator=g)
+    mode = kernel_mode(mixture, bandwidth=0.2)
+    assert ((mode.abs() - 0.6).abs().mean(dim=-1) < 0.1).all()  # in a mode, every row
+    assert mixture.mean(dim=1).abs().mean() < 0.3  # where the mean would stand
+
+
+def test_mode_rule_is_the_kernel_mode_of_the_observations_samples():
+    from sb3_pola.pola.actor import kernel_mode, observation_noise
+
+    data = synthetic_dataset(300, 3, 2, seed=0)
+    model = model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule="mode", mode_samples=8)))
+    model.train(gradient_steps=5, batch_size=32)
+    policy = model.policy
+    obs = th.randn(5, 3)
+    action = policy._predict(obs, deterministic=True)
+    steps = policy.actor_ema.n_diffusion_steps
+    noise = observation_noise(obs, steps, 2 * 8, policy.predict_seed).reshape(steps + 1, 5 * 8, 2)
+    samples = sample_no_grad(policy.actor_ema, policy.actor_features(obs).repeat_interleave(8, dim=0), noise=noise)
+    assert th.allclose(action, kernel_mode(samples.view(5, 8, 2), policy.mode_bandwidth), atol=1e-6)
+    singles = th.cat([policy._predict(obs[i : i + 1], deterministic=True) for i in range(5)])
+    assert th.allclose(singles, action, atol=1e-5)  # each observation its own, whatever the batch
+    assert policy._get_constructor_parameters()["mode_samples"] == 8
 
 
 @pytest.mark.parametrize("rule", ["observation_noise", "noise_free"])

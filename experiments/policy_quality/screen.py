@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
+import re
 import time
 from typing import Any
 
@@ -57,7 +58,9 @@ RULES = {
     "obsnoise": (1, True, "observation_noise"),
     "sample": (1, False, "noise_free"),
     "best10": (10, True, "noise_free"),
+    "mode": (1, True, "mode"),
 }
+# "mode<K>h<bandwidth>", e.g. mode32h0.1: the mode rule with K samples and that kernel bandwidth
 
 
 def patch_actor(layer_norm: bool, dropout: float) -> None:
@@ -190,7 +193,10 @@ def main() -> None:
     row: dict[str, Any] = {"dataset": args.dataset, "name": args.name, "seed": args.seed, "steps": args.steps}
     row["train_s"] = round(time.time() - start)
     for rule in args.rules.split(","):
-        model.policy.n_action_samples, deterministic, model.policy.deterministic_rule = RULES[rule]
+        mode = re.fullmatch(r"mode(\d+)h([\d.]+)", rule)
+        if mode:
+            model.policy.mode_samples, model.policy.mode_bandwidth = int(mode[1]), float(mode[2])
+        model.policy.n_action_samples, deterministic, model.policy.deterministic_rule = RULES["mode" if mode else rule]
         successes: list[bool | None] = []
         returns = evaluate(model, env, args.episodes, 10_000 * (args.seed + 1), deterministic, successes)
         score = data.normalized_score(returns)

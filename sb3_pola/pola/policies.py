@@ -20,6 +20,7 @@ from sb3_pola.common.torch_layers import StateProductsExtractor
 from sb3_pola.pola.actor import (
     DETERMINISTIC_RULES,
     DiffusionActor,
+    kernel_mode,
     noise_from_projection,
     observation_noise,
     observation_noise_projection,
@@ -101,6 +102,8 @@ class POLAPolicy(BasePolicy):
         predict_seed: int = 0,
         predict_actor: str = "ema",
         deterministic_rule: str = "observation_noise",
+        mode_samples: int = 16,
+        mode_bandwidth: float = 0.2,
         dynamics_kwargs: dict[str, Any] | None = None,
         compile_activations: bool = False,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
@@ -134,6 +137,10 @@ class POLAPolicy(BasePolicy):
         if deterministic_rule not in DETERMINISTIC_RULES:
             raise ValueError(f"deterministic_rule must be one of {DETERMINISTIC_RULES}, got {deterministic_rule!r}")
         self.deterministic_rule = deterministic_rule
+        if mode_samples < 1 or mode_bandwidth <= 0:
+            raise ValueError(f"mode_samples must be >= 1 and mode_bandwidth > 0, got {mode_samples}, {mode_bandwidth}")
+        self.mode_samples = mode_samples
+        self.mode_bandwidth = mode_bandwidth
         self.net_arch = net_arch
         self.activation_fn = activation_fn
         if actor_activation_fn is None:
@@ -202,6 +209,8 @@ class POLAPolicy(BasePolicy):
             predict_seed=self.predict_seed,
             predict_actor=self.predict_actor,
             deterministic_rule=self.deterministic_rule,
+            mode_samples=self.mode_samples,
+            mode_bandwidth=self.mode_bandwidth,
             dynamics_kwargs=self.dynamics_kwargs,
             compile_activations=self.compile_activations,
             lr_schedule=self._dummy_schedule,
@@ -230,6 +239,8 @@ class POLAPolicy(BasePolicy):
         actor = self.actor_ema if self.predict_actor == "ema" else self.actor
         # the fast form of actor.sample (same function, float rounding aside): predict needs no gradient
         if n == 1:
+            if deterministic and self.deterministic_rule == "mode":
+                return self._mode_action(actor, obs)
             noise = None
             if deterministic and self.deterministic_rule == "observation_noise":
                 projection, offset = self._noise_projection(obs.device)
@@ -250,14 +261,26 @@ class POLAPolicy(BasePolicy):
             idx = th.multinomial(F.softmax(q, dim=1), 1).squeeze(1)
         return actions.view(batch_size, n, -1)[th.arange(batch_size, device=obs.device), idx]
 
-    def _noise_projection(self, device: th.device) -> tuple[th.Tensor, th.Tensor]:
-        """:func:`~sb3_pola.pola.actor.observation_noise_projection` of this policy, drawn once per seed and device
-        (predict is a hot path; the projection depends only on the sizes and ``predict_seed``)."""
-        key = (self.predict_seed, device)
+    def _mode_action(self, actor: DiffusionActor, obs: th.Tensor) -> th.Tensor:
+        """``deterministic_rule="mode"``: ``mode_samples`` chain samples, each with the observation's own noise,
+        and their densest point (:func:`~sb3_pola.pola.actor.kernel_mode`)."""
+        k, steps = self.mode_samples, actor.n_diffusion_steps
+        projection, offset = self._noise_projection(obs.device, k)
+        # [steps + 1, B, k * A] -> [steps + 1, B * k, A]: row b * k + j is sample j of observation b
+        noise = noise_from_projection(obs, projection, offset, steps).reshape(steps + 1, obs.shape[0] * k, -1)
+        features = self.actor_features(obs).repeat_interleave(k, dim=0)  # [B * k, F]
+        samples = sample_no_grad(actor, features, noise=noise).view(obs.shape[0], k, -1)  # [B, k, A]
+        return kernel_mode(samples, self.mode_bandwidth)
+
+    def _noise_projection(self, device: th.device, n_samples: int = 1) -> tuple[th.Tensor, th.Tensor]:
+        """:func:`~sb3_pola.pola.actor.observation_noise_projection` of this policy for ``n_samples`` chains a
+        state, drawn once per seed, size and device (predict is a hot path; the projection depends only on the sizes
+        and ``predict_seed``)."""
+        key = (self.predict_seed, device, n_samples)
         if getattr(self, "_projection_cache", (None,))[0] != key:
             obs_dim = int(np.prod(self.observation_space.shape))  # type: ignore[arg-type]
             projection, offset = observation_noise_projection(
-                obs_dim, self.actor.n_diffusion_steps, self.actor.action_dim, self.predict_seed
+                obs_dim, self.actor.n_diffusion_steps, self.actor.action_dim * n_samples, self.predict_seed
             )
             self._projection_cache = (key, projection.to(device), offset.to(device))
         return self._projection_cache[1], self._projection_cache[2]
