@@ -677,7 +677,8 @@ def test_mode_rule_is_the_kernel_mode_of_the_observations_samples():
     from sb3_pola.pola.actor import kernel_mode, observation_noise
 
     data = synthetic_dataset(300, 3, 2, seed=0)
-    model = model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule="mode", mode_samples=8)))
+    policy_kwargs = dict(net_arch=[32, 32], deterministic_rule="mode", mode_samples=8)
+    model = model_on_dataset(data, **light(rollout_length=0, policy_kwargs=policy_kwargs))
     model.train(gradient_steps=5, batch_size=32)
     policy = model.policy
     obs = th.randn(5, 3)

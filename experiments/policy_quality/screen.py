@@ -63,6 +63,16 @@ RULES = {
 # "mode<K>h<bandwidth>", e.g. mode32h0.1: the mode rule with K samples and that kernel bandwidth
 
 
+def set_rule(policy: POLAPolicy, rule: str) -> bool:
+    """Set ``policy`` to evaluate under ``rule`` (a key of ``RULES`` or ``mode<K>h<bandwidth>``); returns
+    ``predict``'s ``deterministic``."""
+    mode = re.fullmatch(r"mode(\d+)h([\d.]+)", rule)
+    if mode:
+        policy.mode_samples, policy.mode_bandwidth = int(mode[1]), float(mode[2])
+    policy.n_action_samples, deterministic, policy.deterministic_rule = RULES["mode" if mode else rule]
+    return deterministic
+
+
 def patch_actor(layer_norm: bool, dropout: float) -> None:
     """Build every :class:`DiffusionActor` with LayerNorm and/or dropout in its trunk (before the optimizers and
     the EMA copy are made, so both include them)."""
@@ -193,10 +203,7 @@ def main() -> None:
     row: dict[str, Any] = {"dataset": args.dataset, "name": args.name, "seed": args.seed, "steps": args.steps}
     row["train_s"] = round(time.time() - start)
     for rule in args.rules.split(","):
-        mode = re.fullmatch(r"mode(\d+)h([\d.]+)", rule)
-        if mode:
-            model.policy.mode_samples, model.policy.mode_bandwidth = int(mode[1]), float(mode[2])
-        model.policy.n_action_samples, deterministic, model.policy.deterministic_rule = RULES["mode" if mode else rule]
+        deterministic = set_rule(model.policy, rule)
         successes: list[bool | None] = []
         returns = evaluate(model, env, args.episodes, 10_000 * (args.seed + 1), deterministic, successes)
         score = data.normalized_score(returns)
