@@ -23,7 +23,11 @@ from sb3_pola.pola.export import DeterministicPolicyGraph, PolicyExportError, ex
 from sb3_pola.pola.policies import POLAPolicy
 
 # the light CPU configuration and the paper's (3 x 256 networks, N = 10, state products on); untrained weights
-CONFIGS = {"light": LIGHT_CONFIG, "paper": {**PAPER_CONFIG, "policy_kwargs": {"net_arch": [256, 256, 256]}}}
+CONFIGS = {
+    "light": LIGHT_CONFIG,
+    "paper": {**PAPER_CONFIG, "policy_kwargs": {"net_arch": [256, 256, 256]}},
+    "mode": {**LIGHT_CONFIG, "policy_kwargs": {**LIGHT_CONFIG.get("policy_kwargs", {}), "deterministic_rule": "mode"}},
+}
 ATOL = 1e-5
 
 

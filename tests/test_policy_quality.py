@@ -692,7 +692,7 @@ def test_mode_rule_is_the_kernel_mode_of_the_observations_samples():
     assert policy._get_constructor_parameters()["mode_samples"] == 8
 
 
-@pytest.mark.parametrize("rule", ["observation_noise", "noise_free"])
+@pytest.mark.parametrize("rule", ["observation_noise", "noise_free", "mode"])
 def test_exported_graph_follows_the_deterministic_rule(rule, tmp_path):
     data = synthetic_dataset(300, 3, 2, seed=0)
     model = model_on_dataset(data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule=rule)))

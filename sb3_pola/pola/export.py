@@ -3,7 +3,8 @@
 The graph maps a batch of raw observations to the actions ``model.predict(obs, deterministic=True)``
 returns: the state normalisation, the pairwise state products, the reverse chain of the predict actor (EMA or
 online) unrolled over its fixed number of steps, with the observation's own noise (``deterministic_rule=
-"observation_noise"``, the default) or none (``"noise_free"``), the clip to ``[-1, 1]`` and the rescaling to the
+"observation_noise"``, the default) or none (``"noise_free"``), or ``mode_samples`` chains with the observation's
+own noise and their kernel mode (``"mode"``), the clip to ``[-1, 1]`` and the rescaling to the
 action space's bounds. With ``n_action_samples > 1`` (the Q-ranked rule) the graph also holds the target critics:
 it runs the chain for the ``n`` candidates of ``predict`` (their fixed noise held as a buffer) and keeps the one
 with the highest minimum over the ensemble. Input ``obs`` ``[batch, obs_dim]`` (float32), output
@@ -30,7 +31,7 @@ from torch import nn
 from sb3_pola.common.activations import FusedMish, TwiceDifferentiableMish, inference_mish
 from sb3_pola.common.errors import UserError
 from sb3_pola.common.torch_layers import StateProductsExtractor
-from sb3_pola.pola.actor import DiffusionActor, noise_from_projection, observation_noise_projection
+from sb3_pola.pola.actor import DiffusionActor, kernel_mode, noise_from_projection, observation_noise_projection
 from sb3_pola.pola.critic import EnsembleCritic
 from sb3_pola.pola.fast_sampling import InferencePlan, inference_plan, run_plan
 from sb3_pola.pola.policies import POLAPolicy
@@ -108,11 +109,17 @@ class DeterministicPolicyGraph(nn.Module):
             if self.n_candidates > 1:
                 self.register_buffer("candidate_noise", policy.candidate_noise(actor).detach().cpu().float().clone())
                 self.critic = _exportable_critic(policy.critic_target)
-            # deterministic_rule="observation_noise" (one sample): the fixed projection of the observation's noise
-            self.observation_noise = self.n_candidates == 1 and policy.deterministic_rule == "observation_noise"
+            # deterministic_rule="observation_noise" (one sample) or "mode" (mode_samples of them): the fixed
+            # projection of the observation's noise
+            self.observation_noise = self.n_candidates == 1 and policy.deterministic_rule in ("observation_noise", "mode")
+            self.mode_samples = policy.mode_samples if self.n_candidates == 1 and policy.deterministic_rule == "mode" else 0
+            self.mode_bandwidth = policy.mode_bandwidth
             if self.observation_noise:
                 projection, offset = observation_noise_projection(
-                    extractor.obs_mean.shape[0], actor.n_diffusion_steps, actor.action_dim, policy.predict_seed
+                    extractor.obs_mean.shape[0],
+                    actor.n_diffusion_steps,
+                    actor.action_dim * max(self.mode_samples, 1),
+                    policy.predict_seed,
                 )
                 self.register_buffer("noise_projection", projection)
                 self.register_buffer("noise_offset", offset)
@@ -150,6 +157,8 @@ class DeterministicPolicyGraph(nn.Module):
             x = th.cat((x, x[:, self.idx_i] * x[:, self.idx_j]), dim=-1)  # [B, n + n(n-1)/2]
         if self.critic is not None:
             action = self._best_candidate(obs.float(), x)
+        elif self.mode_samples:
+            action = self._mode(obs.float(), x)
         else:
             noise = None  # the noise-free chain from a_T = 0
             if self.observation_noise:  # the observation's own chain noise, as predict draws it
@@ -157,6 +166,15 @@ class DeterministicPolicyGraph(nn.Module):
             action = run_plan(self.plan(), x, noise)  # clipped to [-1, 1]
         # SB3's unscale_action: [-1, 1] -> [low, high]
         return self.action_low + 0.5 * (action + 1.0) * (self.action_high - self.action_low)
+
+    def _mode(self, obs: th.Tensor, x: th.Tensor) -> th.Tensor:
+        """``predict``'s mode rule: ``k`` chains per state with the observation's own noise, their kernel mode."""
+        b, k, steps = obs.shape[0], self.mode_samples, self.n_diffusion_steps
+        noise = noise_from_projection(obs, self.noise_projection, self.noise_offset, steps)  # [steps + 1, B, k A]
+        noise = noise.reshape(steps + 1, b * k, self.action_dim)  # row b k + j: sample j of state b
+        x_rep = x.unsqueeze(1).expand(b, k, x.shape[1]).reshape(b * k, x.shape[1])  # [B k, features]
+        samples = run_plan(self.plan(), x_rep, noise).view(b, k, self.action_dim)  # [B, k, A]
+        return kernel_mode(samples, self.mode_bandwidth)
 
     def _best_candidate(self, obs: th.Tensor, x: th.Tensor) -> th.Tensor:
         """``predict``'s Q-ranked rule: the chain for ``n`` candidates per state, the best by the pessimistic critic."""
