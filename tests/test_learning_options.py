@@ -323,7 +323,8 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
     assert paper.actor.prediction_type == "epsilon"
     # a constant 1e-3 to the end of learn (#23's thirteenth pass; the cosine decay to 0 before it)
     assert default.learning_rate == 1e-3 and default.lr_schedule(0.0) == pytest.approx(1e-3)
-    assert default.policy.deterministic_rule == "observation_noise"
+    # #23's twenty-ninth pass: the kernel mode of 16 samples (one sample with the observation's noise before)
+    assert (default.policy.deterministic_rule, default.policy.mode_samples, default.policy.mode_bandwidth) == ("mode", 16, 0.2)
     assert default.goal_switches == "relabel"  # #23's fourteenth pass (None before)
     # #23's twenty-eighth pass: the actor on the raw state with ReLU; the paper's on the products with Mish
     kinds = {type(m) for m in default.actor.modules()}, {type(m) for m in paper.actor.modules()}

@@ -635,10 +635,11 @@ def test_deterministic_predict_draws_the_observations_noise():
     from sb3_pola.pola.policies import observation_noise
 
     data = synthetic_dataset(300, 3, 2, seed=0)
-    model = model_on_dataset(data, **light(rollout_length=0))
+    model = model_on_dataset(
+        data, **light(rollout_length=0, policy_kwargs=dict(net_arch=[32, 32], deterministic_rule="observation_noise"))
+    )
     model.train(gradient_steps=5, batch_size=32)
     policy = model.policy
-    assert policy.deterministic_rule == "observation_noise"
     obs = th.randn(6, 3)
     action = policy._predict(obs, deterministic=True)
     feats = policy.actor_features(obs)

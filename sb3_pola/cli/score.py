@@ -105,7 +105,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--eval-rule",
         metavar="RULE",
         help="how the evaluations during training act: ema (default: predict(deterministic=True), the EMA actor's "
-        "chain with the observation's own noise), online, "
+        "chain under the policy's deterministic_rule, the mode of its samples by default), online, "
         "[online-]stochastic (one sample of the noisy chain), [online-]candidates<N>",
     )
     parser.add_argument(

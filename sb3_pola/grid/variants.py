@@ -271,7 +271,7 @@ def apply_eval_rule(model: Any, rule: str) -> bool:
 
     :param model: a POLA model
     :param rule: ``ema`` (the EMA actor's deterministic ``predict``, the default: the chain under the policy's
-        ``deterministic_rule``, the observation's own noise unless set otherwise), ``online`` (the same of the trained
+        ``deterministic_rule``, the mode of the chain's samples unless set otherwise), ``online`` (the same of the trained
         actor), ``stochastic`` / ``online-stochastic`` (one sample of the noisy reverse chain, the
         policy Diffusion-QL trains) or ``candidates<N>`` / ``online-candidates<N>`` (N noisy candidates of the
         EMA / online actor, the one with the highest pessimistic Q kept, as Diffusion-QL evaluates)

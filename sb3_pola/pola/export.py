@@ -2,9 +2,9 @@
 
 The graph maps a batch of raw observations to the actions ``model.predict(obs, deterministic=True)``
 returns: the state normalisation, the pairwise state products, the reverse chain of the predict actor (EMA or
-online) unrolled over its fixed number of steps, with the observation's own noise (``deterministic_rule=
-"observation_noise"``, the default) or none (``"noise_free"``), or ``mode_samples`` chains with the observation's
-own noise and their kernel mode (``"mode"``), the clip to ``[-1, 1]`` and the rescaling to the
+online) unrolled over its fixed number of steps, ``mode_samples`` times with the observation's own noise
+and their kernel mode (``deterministic_rule="mode"``, the default), once (``"observation_noise"``) or with no noise
+(``"noise_free"``), the clip to ``[-1, 1]`` and the rescaling to the
 action space's bounds. With ``n_action_samples > 1`` (the Q-ranked rule) the graph also holds the target critics:
 it runs the chain for the ``n`` candidates of ``predict`` (their fixed noise held as a buffer) and keeps the one
 with the highest minimum over the ensemble. Input ``obs`` ``[batch, obs_dim]`` (float32), output

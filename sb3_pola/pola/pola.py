@@ -262,9 +262,9 @@ class POLA(OfflineAlgorithm):
     collapse), ``lookahead_fixed_goal=True`` (on goal-conditioned data the look-ahead keeps the goal: the model
     had learned the collectors' goal switches and moved the goal near it) and ``goal_switches="relabel"`` (those
     switches keep their goal and its reward, so the critic sees what staying at a goal is worth). The dynamics model
-    fits with beta-NLL and ``predict(deterministic=True)`` draws one sample with the observation's own noise
-    (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``; the shipped
-    InvertedPendulum main job (``make train``) runs the defaults.
+    fits with beta-NLL and ``predict(deterministic=True)`` returns the mode of 16 chain samples drawn with the
+    observation's own noise (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is
+    ``POLA(..., **PAPER_FORM)``; the shipped InvertedPendulum main job (``make train``) runs the defaults.
 
     :param policy: policy class or alias (``"MlpPolicy"``)
     :param env: env (or id) for evaluation callbacks; made from the dataset's metadata if ``None``

@@ -34,14 +34,17 @@ class POLAPolicy(BasePolicy):
 
     ``predict`` uses the EMA actor (as Diffusion-QL evaluates). ``deterministic=False`` draws one sample of the
     reverse chain. ``deterministic=True`` must give the same action for the same observation; with one sample
-    (``n_action_samples=1``) it follows ``deterministic_rule``: ``"observation_noise"`` (default) draws the chain
-    with noise that is a fixed function of the observation (:func:`observation_noise`), so it is a sample of the
-    policy, reproducible, and moves to a mode on mixed data; ``"noise_free"`` starts from ``a_T = 0`` and follows
-    the posterior means, which returns about the conditional mean, and so stands still between the modes of a
-    symmetric mixture (measurements in docs/results.md). With ``n_action_samples > 1`` it draws that many
-    candidates (candidate 0 noise-free, the others with noise from ``predict_seed``, the same for every state)
-    and keeps the one with the highest pessimistic (min over the ensemble) Q-value; ``deterministic=False`` then
-    samples one with probabilities ``softmax(Q)`` as Diffusion-QL does.
+    (``n_action_samples=1``) it follows ``deterministic_rule``: ``"mode"`` (default) draws ``mode_samples`` chains
+    with noise that is a fixed function of the observation (:func:`observation_noise`) and returns their kernel
+    mode (:func:`~sb3_pola.pola.actor.kernel_mode`), the policy's most likely action, as SB3's Gaussian policies
+    return their mean: on unimodal data about the conditional mean, on mixed data a point in the densest mode;
+    ``"observation_noise"`` is one such sample (reproducible, but it keeps the chain's noise); ``"noise_free"``
+    starts from ``a_T = 0`` and follows the posterior means, which returns about the conditional mean, and so stands
+    still between the modes of a symmetric mixture (measurements in docs/results.md, #23's twenty-ninth pass).
+    With ``n_action_samples > 1`` it draws that many candidates (candidate 0 noise-free, the others with noise from
+    ``predict_seed``, the same for every state) and keeps the one with the highest pessimistic (min over the
+    ensemble) Q-value; ``deterministic=False`` then samples one with probabilities ``softmax(Q)`` as Diffusion-QL
+    does.
 
     :param observation_space: a flat ``Box``
     :param action_space: a ``Box``
@@ -65,8 +68,11 @@ class POLAPolicy(BasePolicy):
     :param time_embedding_dim: size of the diffusion-step embedding
     :param n_action_samples: candidate actions per state in ``predict``
     :param predict_seed: seed of the candidates' noise in deterministic ``predict`` with ``n_action_samples > 1``
-    :param deterministic_rule: the action of a deterministic ``predict`` with one sample: ``"observation_noise"``
-        or ``"noise_free"`` (see above)
+    :param deterministic_rule: the action of a deterministic ``predict`` with one sample: ``"mode"``,
+        ``"observation_noise"`` or ``"noise_free"`` (see above)
+    :param mode_samples: chain samples per state of the ``"mode"`` rule
+    :param mode_bandwidth: its kernel's standard deviation in the actions' ``[-1, 1]`` units (0.4 merged
+        halfcheetah/medium-replay's modes and stood still; 0.1 and 0.2 did not)
     :param predict_actor: the actor ``predict`` samples from: ``"ema"`` (Diffusion-QL's evaluation) or
         ``"online"`` (the trained actor itself; the EMA lags it by about ``1 / (1 - ema_decay)`` updates)
     :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`; ``None`` builds no model
@@ -101,7 +107,7 @@ class POLAPolicy(BasePolicy):
         n_action_samples: int = 1,
         predict_seed: int = 0,
         predict_actor: str = "ema",
-        deterministic_rule: str = "observation_noise",
+        deterministic_rule: str = "mode",
         mode_samples: int = 16,
         mode_bandwidth: float = 0.2,
         dynamics_kwargs: dict[str, Any] | None = None,
