@@ -146,11 +146,14 @@ def kernel_mode(samples: th.Tensor, bandwidth: float, n_iterations: int = 10) ->
     sq_dist = (samples.unsqueeze(2) - samples.unsqueeze(1)).pow(2).sum(dim=-1)  # [B, K, K]
     density = th.exp(scale * sq_dist).sum(dim=-1)  # [B, K]
     start = density.argmax(dim=1)  # [B]
-    x = samples.gather(1, start.view(-1, 1, 1).expand(-1, 1, samples.shape[-1])).squeeze(1)  # [B, A]
+    x = samples.gather(1, start.view(-1, 1, 1).expand(-1, 1, samples.shape[-1]))  # [B, 1, A]
+    # mean shift: x <- sum_k w_k a_k with w_k proportional to exp(-|a_k - x|^2 / 2h^2), a softmax over k of
+    # (-|a_k|^2 + 2 a_k.x) / 2h^2 (the |x|^2 term is common to all k and cancels)
+    sq_norm = scale * samples.pow(2).sum(dim=-1).unsqueeze(1)  # [B, 1, K]
     for _ in range(n_iterations):
-        weights = th.exp(scale * (samples - x.unsqueeze(1)).pow(2).sum(dim=-1))  # [B, K]
-        x = (weights.unsqueeze(-1) * samples).sum(dim=1) / weights.sum(dim=1, keepdim=True).clamp_min(1e-30)
-    return x
+        weights = th.softmax(sq_norm - 2.0 * scale * (x @ samples.transpose(1, 2)), dim=-1)  # [B, 1, K]
+        x = weights @ samples  # [B, 1, A]
+    return x.squeeze(1)
 
 
 def observation_noise_projection(obs_dim: int, n_steps: int, action_dim: int, seed: int = 0) -> tuple[th.Tensor, th.Tensor]:
