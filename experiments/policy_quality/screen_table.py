@@ -1,6 +1,7 @@
 """The rows of ``screen.jsonl`` (``screen.py``'s output) as a table: every seed and the mean ± std of each screen.
 
     python experiments/policy_quality/screen_table.py --names RNW T0RNW BCRNW --collection amd
+    python experiments/policy_quality/screen_table.py --names RNW BCRNW --collection amd-mode --against obsnoise --rule mode
 
 One line per (dataset, name) in the file's order, seeds ascending; a seed screened twice keeps its last row.
 """
@@ -48,14 +49,35 @@ def table(cells: dict[tuple[str, str], dict[int, Any]], rule: str) -> str:
     return "\n".join(lines)
 
 
+def paired(cells: dict[tuple[str, str], dict[int, Any]], rule: str, against: str) -> str:
+    """Two rules on the same saved models: each rule's seeds and mean ± std, and the per-seed difference."""
+    lines = [
+        f"| dataset | screen | seeds | {against} | {rule} | {rule} - {against} |",
+        "|---|---|---|---|---|---|",
+    ]
+    for (dataset, name), by_seed in cells.items():
+        seeds = [s for s in sorted(by_seed) if against in by_seed[s]]
+        if not seeds:
+            continue
+        base, new = [by_seed[s][against] for s in seeds], [by_seed[s][rule] for s in seeds]
+        diff = [b - a for a, b in zip(base, new, strict=True)]
+        lines.append(
+            f"| {dataset} | {name} | {', '.join(map(str, seeds))} | {', '.join(f'{x:.1f}' for x in base)} = "
+            f"{fmt_scores(base)} | {', '.join(f'{x:.1f}' for x in new)} = {fmt_scores(new)} | {fmt_scores(diff)} |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--file", type=pathlib.Path, default=HERE / "screen.jsonl")
     parser.add_argument("--names", nargs="+", required=True, help="the screens' --name values")
     parser.add_argument("--rule", default="obsnoise", help="the evaluation rule's column (screen.py --rules)")
     parser.add_argument("--collection", default=None, help="only rows of this collection (e.g. amd)")
+    parser.add_argument("--against", default=None, help="a second rule: both side by side, and their difference")
     args = parser.parse_args()
-    print(table(read(args.file, args.names, args.rule, args.collection), args.rule))
+    cells = read(args.file, args.names, args.rule, args.collection)
+    print(paired(cells, args.rule, args.against) if args.against else table(cells, args.rule))
 
 
 if __name__ == "__main__":
