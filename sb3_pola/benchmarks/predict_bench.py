@@ -76,8 +76,18 @@ def run(
     sac = SAC("MlpPolicy", _SpacesEnv(data.observation_space, data.action_space), device=device, seed=0)
     obs = data.observations[0]
     n_calls = 300 if quick else 1000
-    pola_lat, sac_lat = interleaved_latency(
-        [lambda o: model.predict(o, deterministic=True), lambda o: sac.predict(o, deterministic=True)], obs, n_calls
+    # the policy's own deterministic rule (the mode of 16 chains by default) and, beside it, one chain with the
+    # observation's noise (the rule before #23's twenty-ninth pass), in the same interleaved run
+    one_sample_kwargs = {**(policy_kwargs or {}), "deterministic_rule": "observation_noise"}
+    one_sample = make_pola(data, device=device, policy_kwargs=one_sample_kwargs)
+    pola_lat, one_lat, sac_lat = interleaved_latency(
+        [
+            lambda o: model.predict(o, deterministic=True),
+            lambda o: one_sample.predict(o, deterministic=True),
+            lambda o: sac.predict(o, deterministic=True),
+        ],
+        obs,
+        n_calls,
     )
     ratio = pola_lat["median_s"] / sac_lat["median_s"]
 
@@ -127,6 +137,9 @@ def run(
         "single": {
             "pola_median_s": pola_lat["median_s"],
             "pola_p99_s": pola_lat["p99_s"],
+            "rule": model.policy.deterministic_rule,
+            "one_sample_median_s": one_lat["median_s"],
+            "one_sample_p99_s": one_lat["p99_s"],
             "sac_median_s": sac_lat["median_s"],
             "sac_p99_s": sac_lat["p99_s"],
             "n_calls": n_calls,
