@@ -839,3 +839,22 @@ if [ -n "${THIRD:-}" ]; then
   done
 fi
 # the table: python experiments/policy_quality/screen_table.py --names RNW T0RNW BCRNW RNW-third BCRNW-third PRW-third --collection amd
+# --- twenty-ninth pass (stop 56): the mode rule (now predict(deterministic=True)'s default: the kernel mode of 16
+# chains with the observation's own noise) against one such chain (obsnoise) and the noise-free chain, on the same
+# saved models; mode<K>h<h> varies the samples and the kernel's bandwidth. Hopper: the SEED=0 file (the second).
+# The table: python experiments/policy_quality/screen_table.py --names RNW BCRNW --collection amd-mode --rule mode --against obsnoise
+BCK="{$RNW, \"eta\": 0.0, \"rollout_length\": 0}"
+for s in 0 1 2 3 4; do
+  screen --dataset pointmaze/umaze-v0 --seed "$s" --rules noisefree,obsnoise,mode,mode16h0.1,mode16h0.4,mode32h0.2 --name BCRNW --kwargs "$BCK"
+done
+for s in 0 1; do
+  screen --dataset halfcheetah/medium-replay-v0 --seed "$s" --rules noisefree,obsnoise,mode,mode16h0.1,mode16h0.4,mode32h0.2 \
+    --name BCRNW --kwargs "$BCK"
+done
+for s in 0 1 2; do
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0; do
+    screen --dataset "$d" --seed "$s" --rules noisefree,obsnoise,mode --name RNW --kwargs "{$RNW}"
+    screen --dataset "$d" --seed "$s" --rules noisefree,obsnoise,mode --name BCRNW --kwargs "$BCK"
+  done
+done
+# the main job under the mode rule: make train SEED=0, 1, 2
