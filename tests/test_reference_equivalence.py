@@ -20,6 +20,7 @@ from sb3_pola.common import activations
 from sb3_pola.common.activations import FusedMish, compiled_mish, mish_exp
 from sb3_pola.common.datasets import synthetic_dataset
 from sb3_pola.pola import fast_sampling
+from sb3_pola.pola.actor import kernel_mode
 from sb3_pola.pola.fast_sampling import inference_mish, sample_chain, sample_no_grad
 from sb3_pola.pola.policies import observation_noise
 
@@ -315,12 +316,18 @@ def test_predict_is_fresh_after_every_weight_write(write):
     write(model)
     with th.no_grad():
         after = policy._predict(obs, deterministic=True)
-        # the default deterministic rule: the chain with the observation's own noise
-        noise = observation_noise(obs, policy.actor_ema.n_diffusion_steps, policy.actor_ema.action_dim, policy.predict_seed)
-        want = policy.actor_ema.sample(policy.actor_features(obs), noise=noise)
+        # the default deterministic rule: the kernel mode of the chains with the observation's own noise
+        k, steps = policy.mode_samples, policy.actor_ema.n_diffusion_steps
+        noise = observation_noise(obs, steps, policy.actor_ema.action_dim * k, policy.predict_seed)
+        noise = noise.reshape(steps + 1, obs.shape[0] * k, -1)  # row b k + j: sample j of observation b
+        feats = policy.actor_features(obs).repeat_interleave(k, dim=0)
+        want_samples = policy.actor_ema.sample(feats, noise=noise)
+        fast_samples = sample_no_grad(policy.actor_ema, feats, noise=noise)
+        want = kernel_mode(want_samples.view(obs.shape[0], k, -1), policy.mode_bandwidth)
     assert not th.allclose(before, want), "the write did not change the policy: the test would prove nothing"
-    _close(after, want)
-    _close(sample_no_grad(policy.actor_ema, policy.actor_features(obs), noise=noise), want)
+    _close(fast_samples, want_samples)
+    # the mode of the fast samples (a near tie between two samples' densities may pick another start on rounding)
+    _close(after, kernel_mode(fast_samples.view(obs.shape[0], k, -1), policy.mode_bandwidth))
     with th.no_grad():
         noise_free = policy.actor_ema.sample(policy.actor_features(obs), deterministic=True)
     _close(sample_no_grad(policy.actor_ema, policy.actor_features(obs), deterministic=True), noise_free)
