@@ -224,16 +224,16 @@ def format_tables(results: dict[str, Any]) -> str:
     pred = results.get("predict")
     if isinstance(pred, dict) and "single" in pred:
         s = pred["single"]
+        rule = f" ({s['rule']} rule)" if "rule" in s else ""  # JSON written before the rule was recorded has none
         lines += [
             "",
             "| predict | POLA | SB3 SAC | target | status |",
             "|---|---|---|---|---|",
-            f"| one observation, median of {s['n_calls']} | {_ms(s['pola_median_s'])} ({s['ratio']:.2f}x SAC) "
+            f"| one observation{rule}, median of {s['n_calls']} | {_ms(s['pola_median_s'])} ({s['ratio']:.2f}x SAC) "
             f"| {_ms(s['sac_median_s'])} | <= 2x SAC | {_status(s['met'])} |",
             f"| one observation, p99 | {_ms(s['pola_p99_s'])} | {_ms(s['sac_p99_s'])} | | |",
         ]
-        if "one_sample_median_s" in s:  # the rule's name and the one-sample rule beside it
-            lines[-2] = lines[-2].replace("| one observation,", f"| one observation ({s['rule']} rule),", 1)
+        if "one_sample_median_s" in s:  # the one-chain rule, timed beside the policy's own
             lines.append(
                 f"| one observation (observation_noise rule), median | {_ms(s['one_sample_median_s'])} "
                 f"({s['one_sample_median_s'] / s['sac_median_s']:.2f}x SAC) | | | |"
