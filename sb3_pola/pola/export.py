@@ -204,6 +204,8 @@ def _exportable_activation(layer: Callable[[th.Tensor], th.Tensor]) -> nn.Module
     """A plan's activation as a plain module: the no-grad chain's in-place Mish and the compiled one become ``nn.Mish``."""
     if layer is inference_mish or isinstance(layer, (FusedMish, nn.Mish)):
         return nn.Mish()
+    if layer is th.relu_:
+        return nn.ReLU()
     assert isinstance(layer, nn.Module), f"cannot export the activation {layer!r}"
     return copy.deepcopy(layer)
 

@@ -95,6 +95,11 @@ class InferencePlan(NamedTuple):
     steps: list[tuple[float, th.Tensor, float, float, float, float]]  # per step: alpha, alpha b, c1 recip, c1, c2, sigma
 
 
+# activations as plain functions: a module's call costs more than a ReLU on the few rows of a single predict; the
+# hidden layer's output is a fresh tensor, so the in-place form is safe
+_INFERENCE_ACTIVATIONS: dict[type[nn.Module], Callable[[th.Tensor], th.Tensor]] = {nn.Mish: inference_mish, nn.ReLU: th.relu_}
+
+
 def inference_plan(actor: DiffusionActor, copy_weights: bool = False) -> InferencePlan:
     """The current weights of ``actor`` as an :class:`InferencePlan`.
 
@@ -112,7 +117,7 @@ def inference_plan(actor: DiffusionActor, copy_weights: bool = False) -> Inferen
         time_proj = F.linear(actor.time_mlp(actor.step_indices), weight[:, a_dim : a_dim + t_dim])
         modules = list(actor.trunk)
         hidden: list[tuple[th.Tensor, th.Tensor] | Callable[[th.Tensor], th.Tensor]] = [
-            (m.bias, transposed(m.weight)) if isinstance(m, nn.Linear) else inference_mish if type(m) is nn.Mish else m
+            (m.bias, transposed(m.weight)) if isinstance(m, nn.Linear) else _INFERENCE_ACTIVATIONS.get(type(m), m)
             for m in modules[:-1]
         ]
         last = modules[-1]
@@ -224,12 +229,38 @@ def run_plan(plan: InferencePlan, features: th.Tensor, noise: th.Tensor | None) 
     return x.clamp_(-1.0, 1.0)
 
 
+def kernel_mode_fast(samples: th.Tensor, bandwidth: float, n_iterations: int = 10) -> th.Tensor:
+    """:func:`~sb3_pola.pola.actor.kernel_mode` with the mean shift carried in the samples' weights.
+
+    Every mean-shift point is a convex combination ``x = w S`` of the samples ``S`` (the start is one of them), so
+    ``x S^T = w G`` with the Gram matrix ``G = S S^T`` computed once: a step is one ``baddbmm`` and a softmax
+    instead of five operations, and ``x`` is formed once at the end. The start is chosen as the readable form
+    chooses it (the same operations), so a near tie between two starts resolves the same way.
+
+    :param samples: ``[B, K, A]`` candidate actions of each row
+    :param bandwidth: the kernel's standard deviation, in action units
+    :param n_iterations: mean-shift steps after the start
+    :return: ``[B, A]``
+    """
+    scale = -0.5 / bandwidth**2
+    sq_dist = (samples.unsqueeze(2) - samples.unsqueeze(1)).pow(2).sum(dim=-1)  # [B, K, K]
+    start = th.exp(scale * sq_dist).sum(dim=-1).argmax(dim=1)  # [B]
+    gram = samples @ samples.transpose(1, 2)  # [B, K, K]
+    sq_norm = scale * samples.pow(2).sum(dim=-1).unsqueeze(1)  # [B, 1, K]
+    weights = F.one_hot(start, samples.shape[1]).to(samples.dtype).unsqueeze(1)  # [B, 1, K]
+    for _ in range(n_iterations):
+        # the softmax over k of (-|a_k|^2 + 2 a_k.x) / 2h^2, with a_k.x = (w G)_k
+        weights = th.softmax(th.baddbmm(sq_norm, weights, gram, alpha=-2.0 * scale), dim=-1)  # [B, 1, K]
+    return (weights @ samples).squeeze(1)
+
+
 __all__ = [
     "INFERENCE_CHUNK",
     "InferencePlan",
     "cached_view_plan",
     "inference_mish",
     "inference_plan",
+    "kernel_mode_fast",
     "run_plan",
     "sample_chain",
     "sample_no_grad",

@@ -20,13 +20,12 @@ from sb3_pola.common.torch_layers import StateProductsExtractor
 from sb3_pola.pola.actor import (
     DETERMINISTIC_RULES,
     DiffusionActor,
-    kernel_mode,
     noise_from_projection,
     observation_noise,
     observation_noise_projection,
 )
 from sb3_pola.pola.critic import EnsembleCritic
-from sb3_pola.pola.fast_sampling import sample_no_grad
+from sb3_pola.pola.fast_sampling import kernel_mode_fast, sample_no_grad
 
 
 class POLAPolicy(BasePolicy):
@@ -269,14 +268,14 @@ class POLAPolicy(BasePolicy):
 
     def _mode_action(self, actor: DiffusionActor, obs: th.Tensor) -> th.Tensor:
         """``deterministic_rule="mode"``: ``mode_samples`` chain samples, each with the observation's own noise,
-        and their densest point (:func:`~sb3_pola.pola.actor.kernel_mode`)."""
+        and their densest point (:func:`~sb3_pola.pola.actor.kernel_mode`, in its fast form)."""
         k, steps = self.mode_samples, actor.n_diffusion_steps
         projection, offset = self._noise_projection(obs.device, k)
         # [steps + 1, B, k * A] -> [steps + 1, B * k, A]: row b * k + j is sample j of observation b
         noise = noise_from_projection(obs, projection, offset, steps).reshape(steps + 1, obs.shape[0] * k, -1)
         features = self.actor_features(obs).repeat_interleave(k, dim=0)  # [B * k, F]
         samples = sample_no_grad(actor, features, noise=noise).view(obs.shape[0], k, -1)  # [B, k, A]
-        return kernel_mode(samples, self.mode_bandwidth)
+        return kernel_mode_fast(samples, self.mode_bandwidth)
 
     def _noise_projection(self, device: th.device, n_samples: int = 1) -> tuple[th.Tensor, th.Tensor]:
         """:func:`~sb3_pola.pola.actor.observation_noise_projection` of this policy for ``n_samples`` chains a
