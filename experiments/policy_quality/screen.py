@@ -24,6 +24,7 @@ first 10 episodes' score (the protocol's).
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import pathlib
 import re
@@ -69,6 +70,9 @@ def set_rule(policy: POLAPolicy, rule: str) -> bool:
     mode = re.fullmatch(r"mode(\d+)h([\d.]+)", rule)
     if mode:
         policy.mode_samples, policy.mode_bandwidth = int(mode[1]), float(mode[2])
+    elif rule == "mode":  # the defaults again, whichever mode<K>h<h> an earlier rule of the list set
+        defaults = inspect.signature(POLAPolicy.__init__).parameters
+        policy.mode_samples, policy.mode_bandwidth = defaults["mode_samples"].default, defaults["mode_bandwidth"].default
     policy.n_action_samples, deterministic, policy.deterministic_rule = RULES["mode" if mode else rule]
     return deterministic
 
