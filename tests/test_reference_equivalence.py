@@ -248,14 +248,18 @@ def test_readable_sample_is_the_reference_chain():
 
 @pytest.mark.parametrize("fast", ["sample_chain", "sample_no_grad", "sample_no_grad_copies"])
 @pytest.mark.parametrize("deterministic", [False, True])
-def test_fast_samplers_equal_readable_sample(fast, deterministic):
-    """Each fast form of eq. 5 draws the same noise and gives the same actions as ``DiffusionActor.sample``."""
+@pytest.mark.parametrize("activation", [th.nn.ReLU, th.nn.Mish])
+def test_fast_samplers_equal_readable_sample(fast, deterministic, activation):
+    """Each fast form of eq. 5 draws the same noise and gives the same actions as ``DiffusionActor.sample``,
+    with either activation (the no-grad plan swaps both modules for functions of its own)."""
     fns = {
         "sample_chain": sample_chain,
         "sample_no_grad": sample_no_grad,
         "sample_no_grad_copies": lambda *args, **kwargs: sample_no_grad(*args, copy_weights=True, **kwargs),
     }
-    actor = _model(n_diffusion_steps=4).policy.actor
+    policy_kwargs = {"net_arch": [32, 32], "actor_activation_fn": activation}
+    actor = _model(n_diffusion_steps=4, policy_kwargs=policy_kwargs).policy.actor
+    assert any(isinstance(m, activation) for m in actor.trunk)
     feats = th.randn(16, actor.features_dim, requires_grad=True)
     for _ in range(2):
         got = fns[fast](actor, feats, generator=th.Generator().manual_seed(3), deterministic=deterministic)
@@ -342,6 +346,19 @@ def test_predict_uses_one_cached_plan_until_a_write():
     assert fast_sampling.cached_view_plan(actor) is plan
     actor.time_mlp[1].weight.data.mul_(2.0)
     assert fast_sampling.cached_view_plan(actor) is not plan
+
+
+def test_kernel_mode_fast_equals_kernel_mode():
+    """The mean shift in the samples' weights lands where the readable one lands: on random samples, on two
+    separated modes (the same mode chosen), and at the start itself with no step."""
+    g = th.Generator().manual_seed(0)
+    uniform = th.rand(64, 16, 6, generator=g) * 2 - 1
+    centres = th.tensor([[0.6, -0.2, 0.1], [-0.6, 0.3, -0.4]])
+    mixture = centres[th.randint(0, 2, (32, 16), generator=g)] + 0.05 * th.randn(32, 16, 3, generator=g)
+    for samples in (uniform, mixture):
+        for bandwidth in (0.1, 0.2, 0.4):
+            _close(fast_sampling.kernel_mode_fast(samples, bandwidth), kernel_mode(samples, bandwidth))
+        assert th.equal(fast_sampling.kernel_mode_fast(samples, 0.2, 0), kernel_mode(samples, 0.2, 0))
 
 
 def test_mish_exp_equals_mish():
