@@ -247,7 +247,7 @@ def kernel_mode_fast(samples: th.Tensor, bandwidth: float, n_iterations: int = 1
     start = th.exp(scale * sq_dist).sum(dim=-1).argmax(dim=1)  # [B]
     gram = samples @ samples.transpose(1, 2)  # [B, K, K]
     sq_norm = scale * samples.pow(2).sum(dim=-1).unsqueeze(1)  # [B, 1, K]
-    weights = F.one_hot(start, samples.shape[1]).to(samples.dtype).unsqueeze(1)  # [B, 1, K]
+    weights = sq_norm.new_zeros(sq_norm.shape).scatter_(2, start.view(-1, 1, 1), 1.0)  # [B, 1, K]: the start, one-hot
     for _ in range(n_iterations):
         # the softmax over k of (-|a_k|^2 + 2 a_k.x) / 2h^2, with a_k.x = (w G)_k
         weights = th.softmax(th.baddbmm(sq_norm, weights, gram, alpha=-2.0 * scale), dim=-1)  # [B, 1, K]
