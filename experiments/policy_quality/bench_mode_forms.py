@@ -56,19 +56,26 @@ def main() -> None:
     obs = data.observations[0]
     before_form(before, obs)
     gap = np.abs(before.predict(obs, deterministic=True)[0] - after.predict(obs, deterministic=True)[0]).max()
+    # beside them, the same rule with fewer samples, on the CPU preset's actor, and one chain
+    others = {f"{k} samples": make_pola(data, device="cpu", policy_kwargs={"mode_samples": k}) for k in (8, 4)}
+    others["16 samples, 2 x 256 actor"] = make_pola(
+        data, device="cpu", policy_kwargs={"net_arch": {"pi": [256, 256], "qf": [128, 128]}}
+    )
+    others["one chain (observation_noise)"] = make_pola(
+        data, device="cpu", policy_kwargs={"deterministic_rule": "observation_noise"}
+    )
+    models = [before, after, *others.values()]
     lat = interleaved_latency(
-        [
-            lambda o: before.predict(o, deterministic=True),
-            lambda o: after.predict(o, deterministic=True),
-            lambda o: sac.predict(o, deterministic=True),
-        ],
+        [*(lambda o, m=m: m.predict(o, deterministic=True) for m in models), lambda o: sac.predict(o, deterministic=True)],
         obs,
         args.calls,
     )
-    b, a, s = (x["median_s"] * 1e3 for x in lat)
+    b, a, *rest, s = (x["median_s"] * 1e3 for x in lat)
     print(f"largest action difference {gap:.1e}; medians of {args.calls} interleaved calls:")
     print(f"before {b:.3f} ms ({b / s:.2f}x SAC), after {a:.3f} ms ({a / s:.2f}x SAC), SAC {s:.3f} ms")
     print(f"after / before {a / b:.2f}")
+    for name, t in zip(others, rest, strict=True):
+        print(f"{name}: {t:.3f} ms ({t / s:.2f}x SAC)")
 
 
 if __name__ == "__main__":
