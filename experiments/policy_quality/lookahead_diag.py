@@ -5,9 +5,9 @@ Reads ``OUT/<dataset>/<name>/seed<S>/progress.csv`` that ``screen.py`` writes (`
 over the last 1,000 steps: the critics' Q at the data's actions (``q_mean``) and at the actor's (``lookahead_q_0``),
 the actor's pessimistic Q at the third predicted state (``lookahead_q_3``), the ensemble's spread at the actor's
 actions over its spread at the data's, the model's disagreement at the third step and the Q term's gradient over the
-BC term's. With the scores of ``OUT/screen.jsonl`` (obs rule; the last row of a seed, over the seeds whose statistics
-are there). ``python experiments/policy_quality/lookahead_diag.py [--runs DATASET:T3_NAME:T0_NAME ...]`` (default: the
-eighth pass's names below).
+BC term's. With the scores of ``OUT/screen.jsonl`` (``--rule``, the one-chain rule by default; the last row of a seed,
+over the seeds whose statistics are there). ``python experiments/policy_quality/lookahead_diag.py [--runs
+DATASET:T3_NAME:T0_NAME ...] [--rule mode]`` (default: the eighth pass's names below).
 """
 
 from __future__ import annotations
@@ -59,14 +59,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="outputs/policy_quality")
     parser.add_argument("--runs", nargs="*", help="DATASET:T3_NAME:T0_NAME, e.g. hopper/medium-v0:LRC:T0LRC")
+    parser.add_argument("--rule", default="obsnoise", help="the score column of screen.jsonl (e.g. mode)")
     args = parser.parse_args()
     out = pathlib.Path(args.out)
     runs = RUNS if not args.runs else {r.split(":")[0]: tuple(r.split(":")[1:3]) for r in args.runs}
-    scores: dict[tuple[str, str], dict[int, float]] = {}  # the last obs-rule row of each seed
+    scores: dict[tuple[str, str], dict[int, float]] = {}  # the last row of each seed with the rule's score
     for line in (out / "screen.jsonl").read_text().splitlines():
         row = json.loads(line)
-        if "obsnoise" in row:
-            scores.setdefault((row["dataset"], row["name"]), {})[int(row["seed"])] = row["obsnoise"]
+        if args.rule in row:
+            scores.setdefault((row["dataset"], row["name"]), {})[int(row["seed"])] = row[args.rule]
     print("| dataset | T | seeds | score | " + " | ".join(COLUMNS) + " |")
     print("|---|---|---|---|" + "---|" * len(COLUMNS))
     for dataset, names in runs.items():
