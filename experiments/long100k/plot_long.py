@@ -1,6 +1,6 @@
 """#23's long-run comparisons, one figure each (mean over seeds, a band of one standard deviation):
 
-    python experiments/long100k/plot_long.py [--figure eta|cd5_halfcheetah|cd5_hopper_amd] [--out PNG]
+    python experiments/long100k/plot_long.py [--figure eta|cd5_halfcheetah|cd5_hopper_amd|mode_halfcheetah|mode_hopper_amd]
 
 - ``eta`` (twentieth pass): hopper/medium at the two values of eta, T = 0 and T = 3, BC with the package's actor and
   d3rlpy's TD3+BC (``lrc/scores.csv`` the defaults, ``lrc/t3_eta1_scores.csv``, ``lrc/t0_scores.csv``,
@@ -9,6 +9,9 @@
   (``lrc/cd5_scores.csv``), with BC and TD3+BC;
 - ``cd5_hopper_amd`` (twenty-second pass): hopper/medium of the AMD collection (``hopper_amd/``: another file than the
   other hopper rows, see ``experiments/hopper/collect_summary.json``), the defaults, ``critic_diversity`` 5 and BC.
+- ``mode_halfcheetah``, ``mode_hopper_amd`` (thirtieth pass): the defaults of 2026-12-06 (the raw-state ReLU actor,
+  the mode rule; ``amd_mode/scores.csv``) against the defaults before, BC with the package's actor before and
+  d3rlpy's three (on hopper, run on the AMD collection: ``amd_mode/peers.csv``); ``--out PNG`` writes elsewhere.
 """
 
 from __future__ import annotations
@@ -62,11 +65,39 @@ FIGURES = {
             ("BC, package actor", "hopper_amd/bc_scores.csv", "BC", "tab:gray", "--"),
         ],
     ),
+    "mode_halfcheetah": (
+        "halfcheetah/medium-replay-v0",
+        "the defaults of 2026-12-06 over 100,000 steps",
+        (0, 50),
+        [
+            ("POLA defaults of 2026-12-06 (mode rule)", "amd_mode/scores.csv", "T3", "tab:red", "-"),
+            ("POLA defaults before (lrc)", "lrc/scores.csv", "T3", "tab:orange", ":"),
+            ("BC, package actor before", "lrc/bc_scores.csv", "BC", "tab:gray", "--"),
+            ("d3rlpy TD3+BC", "peers.csv", "d3rlpy-TD3+BC", "black", "--"),
+            ("d3rlpy IQL", "peers.csv", "d3rlpy-IQL", "tab:blue", "--"),
+            ("d3rlpy BC", "peers.csv", "d3rlpy-BC", "tab:green", "--"),
+        ],
+    ),
+    "mode_hopper_amd": (
+        "hopper/medium-v0",
+        "(AMD collection) the defaults of 2026-12-06 over 100,000 steps",
+        (10, 80),
+        [
+            ("POLA defaults of 2026-12-06 (mode rule)", "amd_mode/scores.csv", "T3", "tab:red", "-"),
+            ("POLA defaults before", "hopper_amd/scores.csv", "T3", "tab:orange", ":"),
+            ("BC, package actor before", "hopper_amd/bc_scores.csv", "BC", "tab:gray", "--"),
+            ("d3rlpy TD3+BC", "amd_mode/peers.csv", "d3rlpy-TD3+BC", "black", "--"),
+            ("d3rlpy IQL", "amd_mode/peers.csv", "d3rlpy-IQL", "tab:blue", "--"),
+            ("d3rlpy BC", "amd_mode/peers.csv", "d3rlpy-BC", "tab:green", "--"),
+        ],
+    ),
 }
 OUT = {
     "eta": "lrc/fig_eta_hopper_medium-v0.png",
     "cd5_halfcheetah": "lrc/fig_cd5_halfcheetah_medium-replay-v0.png",
     "cd5_hopper_amd": "hopper_amd/fig_cd5_hopper_medium-v0.png",
+    "mode_halfcheetah": "amd_mode/fig_halfcheetah_medium-replay-v0.png",
+    "mode_hopper_amd": "amd_mode/fig_hopper_medium-v0.png",
 }
 
 

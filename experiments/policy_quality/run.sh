@@ -858,3 +858,24 @@ for s in 0 1 2; do
   done
 done
 # the main job under the mode rule: make train SEED=0, 1, 2
+# --- thirtieth pass (stop 57): T = 0 under the mode rule on the five datasets the twenty-ninth pass had not run it on
+# (the U-maze's is above), and every saved model of the twenty-ninth pass re-evaluated under the mode's fast form
+# (kernel_mode_fast, what predict runs now) and 8 samples. The readable form's scores (mode_readable) come from the
+# same command run with the code before, 51f3cfb, first on the path: git worktree add <dir> 51f3cfb, then PYTHONPATH=<dir>
+# (screen.py's own folder comes first on sys.path, so without it an editable install's code runs, not the worktree's).
+# Tables: python experiments/policy_quality/screen_table.py --names RNW BCRNW T0RNW --collection amd-mode-forms --rule mode --against mode_readable
+#         ... --names RNW BCRNW --collection amd-mode-forms --rule mode8h0.2 --against mode
+#         python experiments/policy_quality/lookahead_diag.py --out "$OUT" --rule mode --runs D:RNW:T0RNW (each dataset)
+# Speed: python experiments/policy_quality/bench_mode_forms.py
+for s in 0 1 2; do
+  for d in halfcheetah/medium-replay-v0 hopper/medium-v0 hopper/medium-replay-v0 pointmaze/medium-v0 halfcheetah/medium-v0; do
+    screen --dataset "$d" --seed "$s" --rules obsnoise,mode --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
+  done
+done
+for s in 0 1 2; do
+  for d in pointmaze/umaze-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 pointmaze/medium-v0 halfcheetah/medium-v0 hopper/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules mode,mode8h0.2 --name RNW --kwargs "{$RNW}"
+    screen --dataset "$d" --seed "$s" --rules mode,mode8h0.2 --name BCRNW --kwargs "$BCK"
+    screen --dataset "$d" --seed "$s" --rules mode --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
+  done
+done
