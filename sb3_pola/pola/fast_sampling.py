@@ -95,8 +95,9 @@ class InferencePlan(NamedTuple):
     steps: list[tuple[float, th.Tensor, float, float, float, float]]  # per step: alpha, alpha b, c1 recip, c1, c2, sigma
 
 
-# activations as plain functions: a module's call costs more than a ReLU on the few rows of a single predict; the
-# hidden layer's output is a fresh tensor, so the in-place form is safe
+# activations as plain functions: a module's call costs more than a ReLU on the few rows of a single predict. In place
+# is safe: every input is a temporary of run_plan (an addmm's output, or the noise-free chain's row of the per-call
+# step bias, read once)
 _INFERENCE_ACTIVATIONS: dict[type[nn.Module], Callable[[th.Tensor], th.Tensor]] = {nn.Mish: inference_mish, nn.ReLU: th.relu_}
 
 
