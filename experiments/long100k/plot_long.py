@@ -72,7 +72,8 @@ FIGURES = {
         [
             ("POLA defaults of 2026-12-06 (mode rule)", "amd_mode/scores.csv", "T3", "tab:red", "-"),
             ("POLA defaults before (lrc)", "lrc/scores.csv", "T3", "tab:orange", ":"),
-            ("BC, package actor before", "lrc/bc_scores.csv", "BC", "tab:gray", "--"),
+            ("BC, package actor before", "lrc/scores.csv", "BC", "tab:gray", "--"),
+            ("BC, package actor of 2026-12-06", "amd_mode/bc_scores.csv", "BC", "tab:brown", "--"),
             ("d3rlpy TD3+BC", "peers.csv", "d3rlpy-TD3+BC", "black", "--"),
             ("d3rlpy IQL", "peers.csv", "d3rlpy-IQL", "tab:blue", "--"),
             ("d3rlpy BC", "peers.csv", "d3rlpy-BC", "tab:green", "--"),
@@ -86,6 +87,7 @@ FIGURES = {
             ("POLA defaults of 2026-12-06 (mode rule)", "amd_mode/scores.csv", "T3", "tab:red", "-"),
             ("POLA defaults before", "hopper_amd/scores.csv", "T3", "tab:orange", ":"),
             ("BC, package actor before", "hopper_amd/bc_scores.csv", "BC", "tab:gray", "--"),
+            ("BC, package actor of 2026-12-06", "amd_mode/bc_scores.csv", "BC", "tab:brown", "--"),
             ("d3rlpy TD3+BC", "amd_mode/peers.csv", "d3rlpy-TD3+BC", "black", "--"),
             ("d3rlpy IQL", "amd_mode/peers.csv", "d3rlpy-IQL", "tab:blue", "--"),
             ("d3rlpy BC", "amd_mode/peers.csv", "d3rlpy-BC", "tab:green", "--"),
@@ -120,6 +122,11 @@ def main() -> None:
     dataset, title, ylim, curves = FIGURES[args.figure]
     fig, ax = plt.subplots(figsize=(6.5, 4.0), dpi=90)
     for label, name, variant, color, style in curves:
+        if not (HERE / name).exists() or not any(
+            r["dataset"] == dataset and r["variant"] == variant for r in read_rows(HERE / name)
+        ):
+            print(f"no rows for {label} ({name}): not drawn")
+            continue
         steps, mean, std, n = curve(HERE / name, dataset, variant)
         ax.plot(steps, mean, style, marker="o", ms=3, color=color, label=f"{label} (n={n})")
         ax.fill_between(steps, mean - std, mean + std, color=color, alpha=0.12)
