@@ -130,6 +130,13 @@ class DiffusionActor(nn.Module):
 DETERMINISTIC_RULES = ("observation_noise", "noise_free", "mode")
 
 
+def densest_sample(samples: th.Tensor, scale: float) -> th.Tensor:
+    """``[B]``: the index of each row's sample of highest Gaussian-kernel density among ``samples`` ``[B, K, A]``
+    (``scale = -1 / 2h^2``), the mean shift's start."""
+    sq_dist = (samples.unsqueeze(2) - samples.unsqueeze(1)).pow(2).sum(dim=-1)  # [B, K, K]
+    return th.exp(scale * sq_dist).sum(dim=-1).argmax(dim=1)
+
+
 def kernel_mode(samples: th.Tensor, bandwidth: float, n_iterations: int = 10) -> th.Tensor:
     """The densest point of each row's samples: mean shift with a Gaussian kernel from the sample of highest
     kernel density (the action of ``deterministic_rule="mode"``).
@@ -143,9 +150,7 @@ def kernel_mode(samples: th.Tensor, bandwidth: float, n_iterations: int = 10) ->
     :return: ``[B, A]``
     """
     scale = -0.5 / bandwidth**2
-    sq_dist = (samples.unsqueeze(2) - samples.unsqueeze(1)).pow(2).sum(dim=-1)  # [B, K, K]
-    density = th.exp(scale * sq_dist).sum(dim=-1)  # [B, K]
-    start = density.argmax(dim=1)  # [B]
+    start = densest_sample(samples, scale)  # [B]
     x = samples.gather(1, start.view(-1, 1, 1).expand(-1, 1, samples.shape[-1]))  # [B, 1, A]
     # mean shift: x <- sum_k w_k a_k with w_k proportional to exp(-|a_k - x|^2 / 2h^2), a softmax over k of
     # (-|a_k|^2 + 2 a_k.x) / 2h^2 (the |x|^2 term is common to all k and cancels)

@@ -29,6 +29,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from sb3_pola.common.activations import inference_mish
+from sb3_pola.pola.actor import densest_sample
 
 if TYPE_CHECKING:
     from sb3_pola.pola.actor import DiffusionActor
@@ -235,8 +236,8 @@ def kernel_mode_fast(samples: th.Tensor, bandwidth: float, n_iterations: int = 1
 
     Every mean-shift point is a convex combination ``x = w S`` of the samples ``S`` (the start is one of them), so
     ``x S^T = w G`` with the Gram matrix ``G = S S^T`` computed once: a step is one ``baddbmm`` and a softmax
-    instead of five operations, and ``x`` is formed once at the end. The start is chosen as the readable form
-    chooses it (the same operations), so a near tie between two starts resolves the same way.
+    instead of five operations, and ``x`` is formed once at the end. The start is the readable form's own
+    (:func:`~sb3_pola.pola.actor.densest_sample`), so a near tie between two starts resolves the same way.
 
     :param samples: ``[B, K, A]`` candidate actions of each row
     :param bandwidth: the kernel's standard deviation, in action units
@@ -244,8 +245,7 @@ def kernel_mode_fast(samples: th.Tensor, bandwidth: float, n_iterations: int = 1
     :return: ``[B, A]``
     """
     scale = -0.5 / bandwidth**2
-    sq_dist = (samples.unsqueeze(2) - samples.unsqueeze(1)).pow(2).sum(dim=-1)  # [B, K, K]
-    start = th.exp(scale * sq_dist).sum(dim=-1).argmax(dim=1)  # [B]
+    start = densest_sample(samples, scale)  # [B]
     gram = samples @ samples.transpose(1, 2)  # [B, K, K]
     sq_norm = scale * samples.pow(2).sum(dim=-1).unsqueeze(1)  # [B, 1, K]
     weights = sq_norm.new_zeros(sq_norm.shape).scatter_(2, start.view(-1, 1, 1), 1.0)  # [B, 1, K]: the start, one-hot
