@@ -205,6 +205,7 @@ def main() -> None:
         model.save(model_path)
     env = make_env(data)
     row: dict[str, Any] = {"dataset": args.dataset, "name": args.name, "seed": args.seed, "steps": args.steps}
+    row["episodes"] = args.episodes
     row["train_s"] = round(time.time() - start)
     for rule in args.rules.split(","):
         deterministic = set_rule(model.policy, rule)
