@@ -103,15 +103,21 @@ OUT = {
 }
 
 
-def curve(path: pathlib.Path, dataset: str, variant: str) -> tuple[list[int], np.ndarray, np.ndarray, int]:
-    """Steps, mean and std over seeds, number of seeds of one variant's evaluations."""
+def curve(path: pathlib.Path, dataset: str, variant: str) -> tuple[list[int], np.ndarray, np.ndarray, str]:
+    """Steps, mean and std over seeds, and the number of seeds of one variant's evaluations ("3", or "3 to 45000,
+    then 1" while some seeds' runs are still short of the others')."""
     by_step: dict[int, list[float]] = defaultdict(list)
     for row in read_rows(path):
         if row["dataset"] == dataset and row["variant"] == variant:
             by_step[row["step"]].append(row["score"])
     steps = sorted(by_step)
     values = [by_step[s] for s in steps]
-    return steps, np.array([np.mean(v) for v in values]), np.array([np.std(v) for v in values]), max(map(len, values))
+    counts = [len(v) for v in values]
+    n = str(max(counts))
+    if min(counts) != max(counts):
+        last = max(s for s, c in zip(steps, counts, strict=True) if c == max(counts))
+        n += f" to {last}, then {min(c for s, c in zip(steps, counts, strict=True) if s > last)}"
+    return steps, np.array([np.mean(v) for v in values]), np.array([np.std(v) for v in values]), n
 
 
 def main() -> None:
@@ -130,14 +136,14 @@ def main() -> None:
         steps, mean, std, n = curve(HERE / name, dataset, variant)
         ax.plot(steps, mean, style, marker="o", ms=3, color=color, label=f"{label} (n={n})")
         ax.fill_between(steps, mean - std, mean + std, color=color, alpha=0.12)
-    ax.set_title(f"{dataset}: {title}", fontsize=10)
+    ax.set_title(f"{dataset}\n{title}", fontsize=9)
     ax.set_xlabel("gradient steps")
     ax.set_ylabel("D4RL-normalised score")
     ax.set_ylim(*ylim)
-    ax.legend(fontsize=7, loc="lower right" if args.figure == "cd5_halfcheetah" else "upper left", ncol=2)
-    fig.tight_layout()
+    # below the axes: the labels carry the seed counts and would cover the curves
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
     out = args.out or str(HERE / OUT[args.figure])
-    fig.savefig(out)
+    fig.savefig(out, bbox_inches="tight")
     print(out)
 
 
