@@ -879,3 +879,17 @@ for s in 0 1 2; do
     screen --dataset "$d" --seed "$s" --rules mode --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
   done
 done
+# --- thirty-first pass (stop 58): the saved 10,000-step models of the twenty-ninth and thirtieth passes (the defaults,
+# T = 0, BC with the package's actor; six datasets, seeds 0-2) evaluated again under the mode on 50 episodes, the
+# first 10 the score's own resets (screen.py writes them as mode_first10); d3rlpy's BC trained again with one
+# 50-episode evaluation at 10k on the AMD hopper file. Rows in screen.jsonl, collection amd-mode-50ep; tables:
+# python experiments/policy_quality/screen_table.py --names RNW T0RNW BCRNW --collection amd-mode-50ep --rule mode --against mode_first10
+for s in 0 1 2; do
+  for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 hopper/medium-replay-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
+    screen --dataset "$d" --seed "$s" --rules mode --episodes 50 --name RNW --kwargs "{$RNW}"
+    screen --dataset "$d" --seed "$s" --rules mode --episodes 50 --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
+    screen --dataset "$d" --seed "$s" --rules mode --episodes 50 --name BCRNW --kwargs "$BCK"
+  done
+done
+"$PY" -m sb3_pola.cli peers --datasets hopper/medium-v0 --algos bc --seeds 0 1 2 --steps 10000 --eval-freq 10000 \
+  --eval-episodes 50 --threads 1 --out "$OUT/peers50"
