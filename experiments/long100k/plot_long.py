@@ -103,13 +103,15 @@ OUT = {
 }
 
 
-def curve(path: pathlib.Path, dataset: str, variant: str) -> tuple[list[int], np.ndarray, np.ndarray, str]:
+def curve(path: pathlib.Path, dataset: str, variant: str) -> tuple[list[int], np.ndarray, np.ndarray, str] | None:
     """Steps, mean and std over seeds, and the number of seeds of one variant's evaluations ("3", or "3 to 45000,
-    then 1" while some seeds' runs are still short of the others')."""
+    then 1" while some seeds' runs are still short of the others'); None without a file or rows."""
     by_step: dict[int, list[float]] = defaultdict(list)
-    for row in read_rows(path):
+    for row in read_rows(path) if path.exists() else []:
         if row["dataset"] == dataset and row["variant"] == variant:
             by_step[row["step"]].append(row["score"])
+    if not by_step:
+        return None
     steps = sorted(by_step)
     values = [by_step[s] for s in steps]
     counts = [len(v) for v in values]
@@ -128,12 +130,11 @@ def main() -> None:
     dataset, title, ylim, curves = FIGURES[args.figure]
     fig, ax = plt.subplots(figsize=(6.5, 4.0), dpi=90)
     for label, name, variant, color, style in curves:
-        if not (HERE / name).exists() or not any(
-            r["dataset"] == dataset and r["variant"] == variant for r in read_rows(HERE / name)
-        ):
+        drawn = curve(HERE / name, dataset, variant)
+        if drawn is None:
             print(f"no rows for {label} ({name}): not drawn")
             continue
-        steps, mean, std, n = curve(HERE / name, dataset, variant)
+        steps, mean, std, n = drawn
         ax.plot(steps, mean, style, marker="o", ms=3, color=color, label=f"{label} (n={n})")
         ax.fill_between(steps, mean - std, mean + std, color=color, alpha=0.12)
     ax.set_title(f"{dataset}\n{title}", fontsize=9)
