@@ -188,6 +188,36 @@ def test_uncertainty_cutoff_and_penalty(pendulum_path):
     assert penalised_loss.item() == pytest.approx(expected.item(), rel=1e-5)
 
 
+def test_lookahead_trust_margin(pendulum_path):
+    dynamics = dict(n_members=3, n_elites=2, hidden_dim=16, n_layers=1)
+    kwargs = light_kwargs(rollout_length=2, dynamics_kwargs=dynamics, lookahead_normalization="first")
+    model = POLA("MlpPolicy", dataset=pendulum_path, **kwargs)
+    model.learn(1)
+    obs = model.replay_buffer.sample(64).observations
+    feats = model.policy.actor_features(obs)
+
+    def loss(margin):
+        model.lookahead_trust_margin = margin
+        th.manual_seed(0)
+        return model._lookahead_q_loss(obs, feats)
+
+    plain_loss, plain = loss(None)
+    assert "lookahead_trusted" not in plain
+    wide_loss, wide = loss(1e9)  # every predicted state within the margin: the paper's loss
+    assert wide["lookahead_trusted"] == 1.0 and wide_loss.item() == pytest.approx(plain_loss.item(), rel=1e-6)
+    none_loss, none = loss(-1e9)  # none within it: the current state's term alone
+    assert none["lookahead_trusted"] == 0.0
+    g, lam = model.gamma, model.lookahead_weight  # both losses divide by the same mean |Q(s_t, a_t)|
+    q = [float(plain[f"lookahead_q_{i}"]) for i in range(3)]
+    ratio = q[0] / (q[0] + lam * (g * q[1] + g**2 * q[2]))
+    assert none_loss.item() == pytest.approx(ratio * plain_loss.item(), rel=1e-5)
+    # the diagnostics keep every alive term whatever the margin
+    for i in range(3):
+        assert none[f"lookahead_q_{i}"] == pytest.approx(float(plain[f"lookahead_q_{i}"]), rel=1e-6)
+    _, strict = loss(0.0)  # some predicted states above the current one, some below
+    assert 0.0 < strict["lookahead_trusted"] < 1.0
+
+
 # ---------------------------------------------------------------- the dynamics model's mean fit
 def _loss_terms(mean_loss: str, beta: float = 0.5):
     th.manual_seed(0)

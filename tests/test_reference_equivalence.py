@@ -149,6 +149,9 @@ def reference_step(model, policy, batch) -> dict[str, object]:
         alive = alive * (1.0 - term)
         state = next_state if model.backprop_through_model else next_state.detach()
         action = ref_sample(actor, feats(state))
+    if model.lookahead_trust_margin is not None:  # a predicted term counts where Q there <= Q(s_t) + m mean |Q(s_t)|
+        bound = (terms[0][0] + model.lookahead_trust_margin * terms[0][0].abs().mean()).detach()
+        terms = terms[:1] + [(q_k, a * (q_k.detach() <= bound).float()) for q_k, a in terms[1:]]
     scale = terms[0][0].abs().mean().detach().clamp_min(max(model.q_scale_floor_value or 0.0, 1e-6))
     # eq. 3's gamma^i, times lookahead_weight at the predicted states
     weights = [model.gamma**i * (model.lookahead_weight if i else 1.0) for i in range(model.rollout_length + 1)]
@@ -203,6 +206,9 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         # advantage-weighted imitation (#23's twenty-first pass), with and without the weights' clip
         {"bc_weight_temp": 1.0},
         {"bc_weight_temp": 3.0, "bc_max_weight": 1.5},
+        # the look-ahead counted only where the critic values a predicted state no higher than the current one
+        {"lookahead_trust_margin": 0.0},
+        {"lookahead_trust_margin": 0.01, "lcb_coef": 1.0},
     ],
 )
 def test_update_matches_reference(kwargs):

@@ -119,6 +119,7 @@ def check_pola_arguments(
     critic_diversity_inputs: str,
     lookahead_uncertainty_penalty: float,
     lookahead_uncertainty_cutoff: float | None,
+    lookahead_trust_margin: float | None,
     lcb_coef: float | None,
     critic_layer_norm: bool,
     eta_gate: str | None,
@@ -178,6 +179,7 @@ def check_pola_arguments(
         raise HyperparameterError(f"critic_diversity > 0 needs n_critics >= 2, got n_critics={n_critics}")
     check_float("lookahead_uncertainty_penalty", lookahead_uncertainty_penalty, low=0.0)
     check_float("lookahead_uncertainty_cutoff", lookahead_uncertainty_cutoff, low=0.0, low_open=True, optional=True)
+    check_float("lookahead_trust_margin", lookahead_trust_margin, optional=True)
     check_float("lcb_coef", lcb_coef, low=0.0, optional=True)
     if lcb_coef is not None and n_critics < 2:
         raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
@@ -194,6 +196,8 @@ def check_pola_arguments(
         check_float_or_schedule("bc_learning_rate", bc_learning_rate, low=0.0, low_open=True)
     check_float("bc_weight_temp", bc_weight_temp, low=0.0, optional=True)
     check_float("bc_max_weight", bc_max_weight, low=0.0, low_open=True)
+    if lookahead_trust_margin is not None and lookahead_target != "q":
+        raise HyperparameterError("lookahead_trust_margin judges Q at the predicted states; it needs lookahead_target='q'")
     if lookahead_actions == "ema" and not backprop_through_model:
         raise HyperparameterError(
             "lookahead_actions='ema' trains the actor through the model only; it needs backprop_through_model=True"
@@ -353,6 +357,13 @@ class POLA(OfflineAlgorithm):
         predicted consequences the model is unsure of. ``0``: off (the paper)
     :param lookahead_uncertainty_cutoff: look-ahead states reached through a step with disagreement above
         this value contribute no Q term, and neither do later ones (as a terminal state). ``None``: off
+    :param lookahead_trust_margin: ``m``: a predicted state's term of eq. 3 counts, sample by sample, only where its
+        pessimistic Q is at most the current state's plus ``m`` times the batch's mean ``|Q(s_t, a_t)|``: the critic
+        never trained at a model state, and a predicted state it values above the state the actor starts from is
+        more likely its extrapolation than a better future (on hopper/medium the long runs dip where
+        ``train/lookahead_q_3`` first exceeds ``train/lookahead_q_0``; docs/results.md, thirty-first pass). The
+        share of predicted terms kept is logged as ``train/lookahead_trusted``. ``None``: every term counts (the
+        paper; default). Needs ``lookahead_target="q"``
     :param lcb_coef: ``k`` of a lower confidence bound ``mean - k std`` over the ensemble used in the policy loss
         in place of the mean of the ``top_k`` smallest members (:func:`lookahead_q_objective`). ``None``: top-K
     :param critic_layer_norm: LayerNorm in the critics' hidden layers (ReBRAC): it bounds Q off the data, so the Q term
@@ -490,6 +501,7 @@ class POLA(OfflineAlgorithm):
         critic_diversity_inputs: str = "actions",
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
+        lookahead_trust_margin: float | None = None,
         lcb_coef: float | None = None,
         critic_layer_norm: bool = True,
         eta_gate: str | None = "critic_maturity",
@@ -542,6 +554,7 @@ class POLA(OfflineAlgorithm):
             critic_diversity_inputs=critic_diversity_inputs,
             lookahead_uncertainty_penalty=lookahead_uncertainty_penalty,
             lookahead_uncertainty_cutoff=lookahead_uncertainty_cutoff,
+            lookahead_trust_margin=lookahead_trust_margin,
             lcb_coef=lcb_coef,
             critic_layer_norm=critic_layer_norm,
             eta_gate=eta_gate,
@@ -609,6 +622,7 @@ class POLA(OfflineAlgorithm):
         self.critic_diversity_inputs = critic_diversity_inputs
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
         self.lookahead_uncertainty_cutoff = lookahead_uncertainty_cutoff
+        self.lookahead_trust_margin = lookahead_trust_margin
         self.lcb_coef = lcb_coef
         self.eta_gate = eta_gate
         self.eta_gate_fraction = eta_gate_fraction
@@ -1154,6 +1168,15 @@ class POLA(OfflineAlgorithm):
         # all T + 1 critic evaluations in one ensemble call (the caller has switched off the critic's gradients)
         q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
         alive_mask = th.stack(alive)  # [T+1, B]
+        counted, trusted = alive_mask, None  # counted: the terms eq. 3 sums, [T+1, B]
+        margin = getattr(self, "lookahead_trust_margin", None)  # models saved before the option have none
+        if margin is not None and horizon > 0:
+            with th.no_grad():  # a predicted state valued above the current one by more than the margin is left out
+                q_pess = pessimistic_q(q.view(-1, horizon + 1, batch_size), self.top_k, self.lcb_coef)  # [T+1, B]
+                bound = q_pess[0] + margin * q_pess[0].abs().mean()  # [B]
+                trusted = (q_pess[1:] <= bound).float()  # [T, B]
+                q_all = (alive_mask * q_pess).mean(dim=1)  # [T+1]: the diagnostics keep every alive term
+            counted = alive_mask * th.cat([th.ones_like(trusted[:1]), trusted])  # [T+1, B]
         objective: Callable[..., tuple[th.Tensor, th.Tensor]] = lookahead_q_objective  # eq. 3/4
         powers = self._lookahead_powers
         if self.lookahead_target == "value_expansion" and horizon > 0:
@@ -1163,7 +1186,7 @@ class POLA(OfflineAlgorithm):
             powers = self._gamma_powers
         q_loss, per_step = objective(
             q.view(-1, horizon + 1, batch_size),  # [N, T+1, B]
-            alive=alive_mask,
+            alive=counted,
             gamma_powers=powers,
             top_k=self.top_k,
             normalization=self.lookahead_normalization,
@@ -1171,6 +1194,9 @@ class POLA(OfflineAlgorithm):
             lcb_coef=self.lcb_coef,
         )
         stats = {f"lookahead_q_{i}": per_step[i].detach() for i in range(horizon + 1)}
+        if trusted is not None:
+            stats.update({f"lookahead_q_{i}": q_all[i] for i in range(horizon + 1)})
+            stats["lookahead_trusted"] = trusted.mean()
         stats["action_saturation"] = saturation
         # the ensemble's spread at the actor's own actions (next to q_ensemble_std at the data's): pessimism
         # protects the actor only where the members disagree more off the data than on it
