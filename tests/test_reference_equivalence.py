@@ -390,17 +390,24 @@ def test_compiled_mish_equals_mish():
 
 @pytest.mark.slow  # torch.compile for minutes; the fallback path: test_compile_update_falls_back_to_eager
 @pytest.mark.parametrize(
-    "cudagraph_path, critic_diversity, model_td_weight, lookahead_actions, bc_weight_temp",
+    "cudagraph_path, critic_diversity, model_td_weight, lookahead_actions, bc_weight_temp, lookahead_trust_margin",
     [
-        (False, 0.0, 0.0, "actor", None),
-        (True, 0.0, 0.0, "actor", None),
-        (False, 0.5, 1.0, "actor", None),
-        (False, 0.0, 0.0, "ema", None),
-        (False, 0.0, 0.0, "actor", 1.0),
+        (False, 0.0, 0.0, "actor", None, None),
+        (True, 0.0, 0.0, "actor", None, None),
+        (False, 0.5, 1.0, "actor", None, None),
+        (False, 0.0, 0.0, "ema", None, None),
+        (False, 0.0, 0.0, "actor", 1.0, None),
+        (False, 0.0, 0.0, "actor", None, 0.0),
     ],
 )
 def test_compiled_update_matches_eager(
-    monkeypatch, cudagraph_path, critic_diversity, model_td_weight, lookahead_actions, bc_weight_temp
+    monkeypatch,
+    cudagraph_path,
+    critic_diversity,
+    model_td_weight,
+    lookahead_actions,
+    bc_weight_temp,
+    lookahead_trust_margin,
 ):
     """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
 
@@ -410,7 +417,8 @@ def test_compiled_update_matches_eager(
     (sb3_pola.common.input_gradients), which a compiled graph differentiates once; with ``model_td_weight`` it also
     holds the model rollouts' TD loss; with ``lookahead_actions="ema"`` the EMA actor acts in the look-ahead, the
     gradient through the model; with ``bc_weight_temp`` the imitation term's advantage weights (the EMA actor's chain
-    and a critic call inside the BC graph).
+    and a critic call inside the BC graph); with ``lookahead_trust_margin`` the look-ahead's mask from the critic's
+    own values.
     """
     from torch._dynamo.utils import counters
 
@@ -432,6 +440,7 @@ def test_compiled_update_matches_eager(
         lookahead_actions=lookahead_actions,
         backprop_through_model=lookahead_actions == "ema",
         bc_weight_temp=bc_weight_temp,
+        lookahead_trust_margin=lookahead_trust_margin,
     )
     # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
     th._dynamo.reset()
