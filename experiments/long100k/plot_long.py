@@ -1,6 +1,6 @@
 """#23's long-run comparisons, one figure each (mean over seeds, a band of one standard deviation):
 
-    python experiments/long100k/plot_long.py [--figure eta|cd5_halfcheetah|cd5_hopper_amd|mode_halfcheetah|mode_hopper_amd]
+    python experiments/long100k/plot_long.py [--figure NAME]  (NAME: one of the figures below; default eta)
 
 - ``eta`` (twentieth pass): hopper/medium at the two values of eta, T = 0 and T = 3, BC with the package's actor and
   d3rlpy's TD3+BC (``lrc/scores.csv`` the defaults, ``lrc/t3_eta1_scores.csv``, ``lrc/t0_scores.csv``,
@@ -11,7 +11,11 @@
   other hopper rows, see ``experiments/hopper/collect_summary.json``), the defaults, ``critic_diversity`` 5 and BC.
 - ``mode_halfcheetah``, ``mode_hopper_amd`` (thirtieth pass): the defaults of 2026-12-06 (the raw-state ReLU actor,
   the mode rule; ``amd_mode/scores.csv``) against the defaults before, BC with the package's actor before and
-  d3rlpy's three (on hopper, run on the AMD collection: ``amd_mode/peers.csv``); ``--out PNG`` writes elsewhere.
+  d3rlpy's three (on hopper, run on the AMD collection: ``amd_mode/peers.csv``);
+- ``dip30k`` (thirty-second pass): hopper/medium's first 30,000 steps (AMD collection), the defaults against
+  ``lookahead_trust_margin`` 0 and T = 0 (``amd_mode/dip30k.csv``) and BC with the package's actor.
+
+``--out PNG`` writes elsewhere.
 """
 
 from __future__ import annotations
@@ -93,22 +97,37 @@ FIGURES = {
             ("d3rlpy BC", "amd_mode/peers.csv", "d3rlpy-BC", "tab:green", "--"),
         ],
     ),
+    "dip30k": (
+        "hopper/medium-v0",
+        "(AMD collection) the first 30,000 steps: the look-ahead and the 20k dip",
+        (20, 50),
+        [
+            ("POLA defaults (T = 3)", "amd_mode/scores.csv", "T3", "tab:red", "-"),
+            ("POLA T = 3, lookahead_trust_margin 0", "amd_mode/dip30k.csv", "T3-trust0", "tab:purple", "-"),
+            ("POLA T = 0", "amd_mode/dip30k.csv", "T0", "tab:blue", "-"),
+            ("BC, package actor", "amd_mode/bc_scores.csv", "BC", "tab:brown", "--"),
+        ],
+    ),
 }
+XMAX = {"dip30k": 30000}  # figures of a shorter budget than their curves' files
 OUT = {
     "eta": "lrc/fig_eta_hopper_medium-v0.png",
     "cd5_halfcheetah": "lrc/fig_cd5_halfcheetah_medium-replay-v0.png",
     "cd5_hopper_amd": "hopper_amd/fig_cd5_hopper_medium-v0.png",
     "mode_halfcheetah": "amd_mode/fig_halfcheetah_medium-replay-v0.png",
     "mode_hopper_amd": "amd_mode/fig_hopper_medium-v0.png",
+    "dip30k": "amd_mode/fig_dip30k_hopper_medium-v0.png",
 }
 
 
-def curve(path: pathlib.Path, dataset: str, variant: str) -> tuple[list[int], np.ndarray, np.ndarray, str] | None:
-    """Steps, mean and std over seeds, and the number of seeds of one variant's evaluations ("3", or "3 to 45000,
-    then 1" while some seeds' runs are still short of the others'); None without a file or rows."""
+def curve(
+    path: pathlib.Path, dataset: str, variant: str, max_step: float = float("inf")
+) -> tuple[list[int], np.ndarray, np.ndarray, str] | None:
+    """Steps, mean and std over seeds, and the number of seeds of one variant's evaluations up to ``max_step`` ("3",
+    or "3 to 45000, then 1" while some seeds' runs are still short of the others'); None without a file or rows."""
     by_step: dict[int, list[float]] = defaultdict(list)
     for row in read_rows(path) if path.exists() else []:
-        if row["dataset"] == dataset and row["variant"] == variant:
+        if row["dataset"] == dataset and row["variant"] == variant and row["step"] <= max_step:
             by_step[row["step"]].append(row["score"])
     if not by_step:
         return None
@@ -130,7 +149,7 @@ def main() -> None:
     dataset, title, ylim, curves = FIGURES[args.figure]
     fig, ax = plt.subplots(figsize=(6.5, 4.0), dpi=90)
     for label, name, variant, color, style in curves:
-        drawn = curve(HERE / name, dataset, variant)
+        drawn = curve(HERE / name, dataset, variant, XMAX.get(args.figure, float("inf")))
         if drawn is None:
             print(f"no rows for {label} ({name}): not drawn")
             continue
