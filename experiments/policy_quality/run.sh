@@ -903,3 +903,8 @@ for s in 0 1 2; do
   OUT="$OUT/dip30k_trust0" STEPS=30000 EXTRA='{"lookahead_trust_margin": 0.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0
   OUT="$OUT/dip30k_t0" STEPS=30000 VARIANTS=T0 bash experiments/long100k/run.sh "$s" hopper/medium-v0
 done
+# and the option at 10,000 steps, seed 0, on the six datasets (screen.jsonl collection amd-trust0; table:
+# python experiments/policy_quality/screen_table.py --names TR0RNW --collection amd-trust0 --rule mode)
+for d in hopper/medium-v0 pointmaze/umaze-v0 hopper/medium-replay-v0 pointmaze/medium-v0 halfcheetah/medium-replay-v0 halfcheetah/medium-v0; do
+  screen --dataset "$d" --seed 0 --rules mode --name TR0RNW --kwargs "{$RNW, \"lookahead_trust_margin\": 0.0}"
+done
