@@ -162,13 +162,18 @@ def test_disagreement_is_the_elites_spread():
         assert model.step(obs, act)[3].abs().max() < 1e-6
 
 
-def test_uncertainty_cutoff_and_penalty(pendulum_path):
+def _lookahead_setup(dataset, batch_size):
+    """A light T = 2 model after one step, a batch of its data and the actor's features of it."""
     dynamics = dict(n_members=3, n_elites=2, hidden_dim=16, n_layers=1)
     kwargs = light_kwargs(rollout_length=2, dynamics_kwargs=dynamics, lookahead_normalization="first")
-    model = POLA("MlpPolicy", dataset=pendulum_path, **kwargs)
+    model = POLA("MlpPolicy", dataset=dataset, **kwargs)
     model.learn(1)
-    obs = model.replay_buffer.sample(16).observations
-    feats = model.policy.actor_features(obs)
+    obs = model.replay_buffer.sample(batch_size).observations
+    return model, obs, model.policy.actor_features(obs)
+
+
+def test_uncertainty_cutoff_and_penalty(pendulum_path):
+    model, obs, feats = _lookahead_setup(pendulum_path, 16)
     th.manual_seed(0)
     plain_loss, plain = model._lookahead_q_loss(obs, feats)
     assert plain["lookahead_uncertainty_1"] > 0 and plain["lookahead_alive"] > 0
@@ -189,12 +194,7 @@ def test_uncertainty_cutoff_and_penalty(pendulum_path):
 
 
 def test_lookahead_trust_margin(pendulum_path):
-    dynamics = dict(n_members=3, n_elites=2, hidden_dim=16, n_layers=1)
-    kwargs = light_kwargs(rollout_length=2, dynamics_kwargs=dynamics, lookahead_normalization="first")
-    model = POLA("MlpPolicy", dataset=pendulum_path, **kwargs)
-    model.learn(1)
-    obs = model.replay_buffer.sample(64).observations
-    feats = model.policy.actor_features(obs)
+    model, obs, feats = _lookahead_setup(pendulum_path, 64)
 
     def loss(margin):
         model.lookahead_trust_margin = margin
