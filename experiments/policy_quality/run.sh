@@ -897,7 +897,8 @@ done
 # folder as in the twenty-third pass) against the look-ahead: 30,000 steps, evaluations every 5k, seeds 0-2, with
 # lookahead_trust_margin 0 (a predicted state's term counts only where the critic values it no higher than the
 # current state) and with T = 0, next to the defaults' 100k runs (experiments/long100k/amd_mode/). Rows in
-# experiments/long100k/amd_mode/dip30k.csv; the 5,000-step means of the look-ahead's statistics:
+# experiments/long100k/amd_mode/dip30k.csv (the two OUTs' scores.csv, the trust runs' variant renamed T3-trust0); the
+# 5,000-step means of the look-ahead's statistics:
 # python experiments/long100k/dip_diag.py <OUT>/train/<run> ...
 for s in 0 1 2; do
   OUT="$OUT/dip30k_trust0" STEPS=30000 EXTRA='{"lookahead_trust_margin": 0.0}' bash experiments/long100k/run.sh "$s" hopper/medium-v0
