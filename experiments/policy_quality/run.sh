@@ -909,3 +909,16 @@ done
 for d in hopper/medium-v0 pointmaze/umaze-v0 hopper/medium-replay-v0 pointmaze/medium-v0 halfcheetah/medium-replay-v0 halfcheetah/medium-v0; do
   screen --dataset "$d" --seed 0 --rules mode --name TR0RNW --kwargs "{$RNW, \"lookahead_trust_margin\": 0.0}"
 done
+# --- thirty-third pass (stop 60): can a test on the critic's values tell the look-ahead's extrapolation from a better
+# future? The value test (lookahead_trust_margin 0) against a Bellman test (the model's rewards plus gamma^i Q at the
+# predicted state, against Q at the current one), per sample, on the defaults' seed-0 10k models (the twenty-eighth
+# pass's RNW screens) and the 100k long runs (experiments/long100k/amd_mode/; their OUT here outputs/long100k).
+# Output: experiments/long100k/amd_mode/trust_gap.txt.
+for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 hopper/medium-replay-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
+  "$PY" experiments/long100k/trust_gap.py "$OUT/${d//\//_}/RNW/seed0.zip" "$d"
+done
+for s in 0 1; do
+  for d in halfcheetah/medium-replay-v0 hopper/medium-v0; do
+    "$PY" experiments/long100k/trust_gap.py "outputs/long100k/models/${d//\//_}__T3__seed$s.zip" "$d"
+  done
+done
