@@ -15,7 +15,9 @@
 - ``dip30k`` (thirty-second pass): hopper/medium's first 30,000 steps (AMD collection), the defaults against
   ``lookahead_trust_margin`` 0 and T = 0 (``amd_mode/dip30k.csv``) and BC with the package's actor.
 
-``--out PNG`` writes elsewhere.
+``--out PNG`` writes elsewhere. ``--table`` prints the figure's curves as a Markdown table instead: each seed's score
+at the budget's end (or at the last step it reached) and its mean over the evaluations from ``--late`` steps on
+(default 30000), and the mean ± std over the seeds that finished.
 """
 
 from __future__ import annotations
@@ -141,11 +143,45 @@ def curve(
     return steps, np.array([np.mean(v) for v in values]), np.array([np.std(v) for v in values]), n
 
 
+def seed_table(figure: str, late: int) -> str:
+    """The figure's curves, a row each: per seed the final score and the mean from ``late`` on, then over seeds."""
+    dataset, _, _, curves = FIGURES[figure]
+    budget = XMAX.get(figure, 100000)
+    lines = [
+        f"| {dataset}: run | seeds: score at {budget // 1000}k (or at the step reached) | at {budget // 1000}k, mean ± std "
+        f"| mean from {late // 1000}k on, per seed |",
+        "|---|---|---|---|",
+    ]
+    for label, name, variant, _, _ in curves:
+        by_seed: dict[int, dict[int, float]] = defaultdict(dict)
+        path = HERE / name
+        for row in read_rows(path) if path.exists() else []:
+            if row["dataset"] == dataset and row["variant"] == variant and row["step"] <= budget:
+                by_seed[row["seed"]][row["step"]] = row["score"]
+        if not by_seed:
+            continue
+        finals, late_means = [], []
+        for seed, scores in sorted(by_seed.items()):
+            last = max(scores)
+            finals.append(f"{seed}: {scores[last]:.1f}" + ("" if last == budget else f" at {last // 1000}k"))
+            tail = [v for step, v in scores.items() if step >= late]
+            late_means.append(f"{np.mean(tail):.1f}" if tail else "-")
+        done = [scores[budget] for scores in by_seed.values() if budget in scores]
+        summary = f"{np.mean(done):.1f} ± {np.std(done, ddof=1):.1f} ({len(done)})" if len(done) > 1 else "-"
+        lines.append(f"| {label} | {', '.join(finals)} | {summary} | {', '.join(late_means)} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--figure", choices=sorted(FIGURES), default="eta")
     parser.add_argument("--out", help="the PNG to write (default: the figure's file beside its CSVs)")
+    parser.add_argument("--table", action="store_true", help="print the seeds' table instead of drawing")
+    parser.add_argument("--late", type=int, default=30000, help="--table: the late mean's first step")
     args = parser.parse_args()
+    if args.table:
+        print(seed_table(args.figure, args.late))
+        return
     dataset, title, ylim, curves = FIGURES[args.figure]
     fig, ax = plt.subplots(figsize=(6.5, 4.0), dpi=90)
     for label, name, variant, color, style in curves:
