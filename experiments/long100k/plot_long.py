@@ -12,6 +12,9 @@
 - ``mode_halfcheetah``, ``mode_hopper_amd`` (thirtieth pass): the defaults of 2026-12-06 (the raw-state ReLU actor,
   the mode rule; ``amd_mode/scores.csv``) against the defaults before, BC with the package's actor before and
   d3rlpy's three (on hopper, run on the AMD collection: ``amd_mode/peers.csv``);
+- ``long_halfcheetah``, ``long_hopper`` (thirty-third pass): #23's long-run figures as its done-when asks, the
+  defaults, BC with the package's actor and d3rlpy's three, nothing else (the ``mode_*`` figures' curves without the
+  defaults before);
 - ``dip30k`` (thirty-second pass): hopper/medium's first 30,000 steps (AMD collection), the defaults against
   ``lookahead_trust_margin`` 0 and T = 0 (``amd_mode/dip30k.csv``) and BC with the package's actor.
 
@@ -99,6 +102,30 @@ FIGURES = {
             ("d3rlpy BC", "amd_mode/peers.csv", "d3rlpy-BC", "tab:green", "--"),
         ],
     ),
+    "long_halfcheetah": (
+        "halfcheetah/medium-replay-v0",
+        "the defaults over 100,000 steps against d3rlpy's baselines",
+        (0, 50),
+        [
+            ("POLA, defaults", "amd_mode/scores.csv", "T3", "tab:red", "-"),
+            ("BC, package actor", "amd_mode/bc_scores.csv", "BC", "tab:brown", "--"),
+            ("d3rlpy TD3+BC (Intel VM)", "peers.csv", "d3rlpy-TD3+BC", "black", "--"),
+            ("d3rlpy IQL (Intel VM)", "peers.csv", "d3rlpy-IQL", "tab:blue", "--"),
+            ("d3rlpy BC (Intel VM)", "peers.csv", "d3rlpy-BC", "tab:green", "--"),
+        ],
+    ),
+    "long_hopper": (
+        "hopper/medium-v0",
+        "(AMD collection) the defaults over 100,000 steps against d3rlpy's baselines",
+        (10, 80),
+        [
+            ("POLA, defaults", "amd_mode/scores.csv", "T3", "tab:red", "-"),
+            ("BC, package actor", "amd_mode/bc_scores.csv", "BC", "tab:brown", "--"),
+            ("d3rlpy TD3+BC", "amd_mode/peers.csv", "d3rlpy-TD3+BC", "black", "--"),
+            ("d3rlpy IQL", "amd_mode/peers.csv", "d3rlpy-IQL", "tab:blue", "--"),
+            ("d3rlpy BC", "amd_mode/peers.csv", "d3rlpy-BC", "tab:green", "--"),
+        ],
+    ),
     "dip30k": (
         "hopper/medium-v0",
         "(AMD collection) the first 30,000 steps: the look-ahead and the 20k dip",
@@ -119,6 +146,8 @@ OUT = {
     "mode_halfcheetah": "amd_mode/fig_halfcheetah_medium-replay-v0.png",
     "mode_hopper_amd": "amd_mode/fig_hopper_medium-v0.png",
     "dip30k": "amd_mode/fig_dip30k_hopper_medium-v0.png",
+    "long_halfcheetah": "amd_mode/fig_long_halfcheetah_medium-replay-v0.png",
+    "long_hopper": "amd_mode/fig_long_hopper_medium-v0.png",
 }
 
 
