@@ -55,6 +55,7 @@ def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
 
 LOOKAHEAD_NORMALIZATIONS = ("first", "weights")
 LOOKAHEAD_TARGETS = ("q", "value_expansion")
+LOOKAHEAD_TRUST_RULES = ("value", "bellman")
 LOOKAHEAD_ACTIONS = ("actor", "ema")
 ETA_GATES = (None, "critic_maturity")
 GOAL_SWITCHES = (None, "terminal", "relabel")
@@ -120,6 +121,7 @@ def check_pola_arguments(
     lookahead_uncertainty_penalty: float,
     lookahead_uncertainty_cutoff: float | None,
     lookahead_trust_margin: float | None,
+    lookahead_trust_rule: str,
     lcb_coef: float | None,
     critic_layer_norm: bool,
     eta_gate: str | None,
@@ -180,6 +182,7 @@ def check_pola_arguments(
     check_float("lookahead_uncertainty_penalty", lookahead_uncertainty_penalty, low=0.0)
     check_float("lookahead_uncertainty_cutoff", lookahead_uncertainty_cutoff, low=0.0, low_open=True, optional=True)
     check_float("lookahead_trust_margin", lookahead_trust_margin, optional=True)
+    check_choice("lookahead_trust_rule", lookahead_trust_rule, LOOKAHEAD_TRUST_RULES)
     check_float("lcb_coef", lcb_coef, low=0.0, optional=True)
     if lcb_coef is not None and n_critics < 2:
         raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
@@ -365,6 +368,12 @@ class POLA(OfflineAlgorithm):
         predicted states run forward (halfcheetah) or to the goal (the mazes) it drops most of them, which the critic
         rightly values higher (docs/results.md, thirty-second pass). The share of predicted terms kept is logged as
         ``train/lookahead_trusted``. ``None``: every term counts (the paper; default). Needs ``lookahead_target="q"``
+    :param lookahead_trust_rule: what ``lookahead_trust_margin`` holds against the current state's pessimistic Q.
+        ``"value"`` (default): the predicted state's own. ``"bellman"``: the value the rollout implies for the current
+        state, the model's discounted rewards on the way (while alive) plus ``gamma^i Q(s_{t+i}, a_{t+i})``: a better
+        future that the critic already counts at ``s_t`` passes, a value that appears only at the predicted state does
+        not. It keeps as many of hopper/medium's terms as ``"value"`` but other ones, and more where the future is
+        better (halfcheetah/medium-replay, the mazes; docs/results.md, thirty-third pass)
     :param lcb_coef: ``k`` of a lower confidence bound ``mean - k std`` over the ensemble used in the policy loss
         in place of the mean of the ``top_k`` smallest members (:func:`lookahead_q_objective`). ``None``: top-K
     :param critic_layer_norm: LayerNorm in the critics' hidden layers (ReBRAC): it bounds Q off the data, so the Q term
@@ -503,6 +512,7 @@ class POLA(OfflineAlgorithm):
         lookahead_uncertainty_penalty: float = 0.0,
         lookahead_uncertainty_cutoff: float | None = None,
         lookahead_trust_margin: float | None = None,
+        lookahead_trust_rule: str = "value",
         lcb_coef: float | None = None,
         critic_layer_norm: bool = True,
         eta_gate: str | None = "critic_maturity",
@@ -556,6 +566,7 @@ class POLA(OfflineAlgorithm):
             lookahead_uncertainty_penalty=lookahead_uncertainty_penalty,
             lookahead_uncertainty_cutoff=lookahead_uncertainty_cutoff,
             lookahead_trust_margin=lookahead_trust_margin,
+            lookahead_trust_rule=lookahead_trust_rule,
             lcb_coef=lcb_coef,
             critic_layer_norm=critic_layer_norm,
             eta_gate=eta_gate,
@@ -624,6 +635,7 @@ class POLA(OfflineAlgorithm):
         self.lookahead_uncertainty_penalty = lookahead_uncertainty_penalty
         self.lookahead_uncertainty_cutoff = lookahead_uncertainty_cutoff
         self.lookahead_trust_margin = lookahead_trust_margin
+        self.lookahead_trust_rule = lookahead_trust_rule
         self.lcb_coef = lcb_coef
         self.eta_gate = eta_gate
         self.eta_gate_fraction = eta_gate_fraction
@@ -1175,7 +1187,13 @@ class POLA(OfflineAlgorithm):
             with th.no_grad():  # a predicted state valued above the current one by more than the margin is left out
                 q_pess = pessimistic_q(q.view(-1, horizon + 1, batch_size), self.top_k, self.lcb_coef)  # [T+1, B]
                 bound = q_pess[0] + margin * q_pess[0].abs().mean()  # [B]
-                trusted = (q_pess[1:] <= bound).float()  # [T, B]
+                judged = q_pess[1:]  # [T, B]
+                if getattr(self, "lookahead_trust_rule", "value") == "bellman":  # old models: "value"
+                    # the rollout read as the critic's own chain: sum_{j<i} gamma^j r_j + gamma^i Q(s_i, a_i)
+                    powers_ = self._gamma_powers[:, None]  # [T+1, 1]
+                    paid = th.cumsum(powers_[:-1] * alive_mask[:-1] * th.stack(rewards), dim=0)  # [T, B]
+                    judged = paid + powers_[1:] * judged
+                trusted = (judged <= bound).float()  # [T, B]
                 q_all = (alive_mask * q_pess).mean(dim=1)  # [T+1]: the diagnostics keep every alive term
             counted = alive_mask * th.cat([th.ones_like(trusted[:1]), trusted])  # [T+1, B]
         objective: Callable[..., tuple[th.Tensor, th.Tensor]] = lookahead_q_objective  # eq. 3/4
