@@ -193,8 +193,10 @@ def test_uncertainty_cutoff_and_penalty(pendulum_path):
     assert penalised_loss.item() == pytest.approx(expected.item(), rel=1e-5)
 
 
-def test_lookahead_trust_margin(pendulum_path):
+@pytest.mark.parametrize("rule", ["value", "bellman"])
+def test_lookahead_trust_margin(pendulum_path, rule):
     model, obs, feats = _lookahead_setup(pendulum_path, 64)
+    model.lookahead_trust_rule = rule  # what the margin holds against Q(s_t): Q(s_i), or the rollout's implied value
 
     def loss(margin):
         model.lookahead_trust_margin = margin
@@ -214,8 +216,9 @@ def test_lookahead_trust_margin(pendulum_path):
     # the diagnostics keep every alive term whatever the margin
     for i in range(3):
         assert none[f"lookahead_q_{i}"] == pytest.approx(float(plain[f"lookahead_q_{i}"]), rel=1e-6)
-    _, strict = loss(0.0)  # some predicted states above the current one, some below
-    assert 0.0 < strict["lookahead_trusted"] < 1.0
+    # a wider margin keeps more, and somewhere between the extremes it keeps some and drops others
+    shares = [float(loss(m)[1]["lookahead_trusted"]) for m in (-0.1, -0.01, -0.003, -0.001, 0.0, 0.001, 0.01, 0.1)]
+    assert shares == sorted(shares) and any(0.0 < share < 1.0 for share in shares)
 
 
 # ---------------------------------------------------------------- the dynamics model's mean fit

@@ -125,7 +125,7 @@ def reference_step(model, policy, batch) -> dict[str, object]:
     # L_q (eq. 3, 4): gamma^i-weighted top-K pessimistic Q along the model rollout, masked after termination
     state, action = obs, ref_sample(actor, features)
     alive = th.ones(obs.shape[0])
-    terms, penalties = [], []
+    terms, penalties, rewards = [], [], []
     dyn = policy.dynamics
     for i in range(model.rollout_length + 1):
         q_i = ref_q(critic, state, action, detach=True)
@@ -137,7 +137,8 @@ def reference_step(model, policy, batch) -> dict[str, object]:
         terms.append((q_k, alive))
         if i == model.rollout_length:
             break
-        next_state, _, term_prob, _ = dyn.step(state, action)
+        next_state, reward, term_prob, _ = dyn.step(state, action)
+        rewards.append(model.gamma**i * alive * reward * model.reward_scale)  # r_i counts while s_i is alive
         # the elites' disagreement, member by member: std over elites of the mean state change (standardised)
         x = th.cat(((state - dyn.obs_mean) / dyn.obs_std, (action - dyn.act_mean) / dyn.act_std), dim=-1)
         means = th.stack([dyn._forward(x[None], dyn.elites[j : j + 1])[0][0] for j in range(dyn.n_elites)])
@@ -151,7 +152,10 @@ def reference_step(model, policy, batch) -> dict[str, object]:
         action = ref_sample(actor, feats(state))
     if model.lookahead_trust_margin is not None:  # a predicted term counts where Q there <= Q(s_t) + m mean |Q(s_t)|
         bound = (terms[0][0] + model.lookahead_trust_margin * terms[0][0].abs().mean()).detach()
-        terms = terms[:1] + [(q_k, a * (q_k.detach() <= bound).float()) for q_k, a in terms[1:]]
+        judged = [q_k.detach() for q_k, _ in terms]
+        if model.lookahead_trust_rule == "bellman":  # or the value the rollout implies for s_t
+            judged = [sum(rewards[:i]) + model.gamma**i * judged[i] for i in range(len(judged))]
+        terms = terms[:1] + [(q_k, a * (judged[i] <= bound).float()) for i, (q_k, a) in enumerate(terms) if i > 0]
     scale = terms[0][0].abs().mean().detach().clamp_min(max(model.q_scale_floor_value or 0.0, 1e-6))
     # eq. 3's gamma^i, times lookahead_weight at the predicted states
     weights = [model.gamma**i * (model.lookahead_weight if i else 1.0) for i in range(model.rollout_length + 1)]
@@ -209,6 +213,9 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         # the look-ahead counted only where the critic values a predicted state no higher than the current one
         {"lookahead_trust_margin": 0.0},
         {"lookahead_trust_margin": 0.01, "lcb_coef": 1.0},
+        # or where the value the rollout implies for the current state is (the model's rewards on the way)
+        {"lookahead_trust_margin": 0.0, "lookahead_trust_rule": "bellman"},
+        {"lookahead_trust_margin": 0.005, "lookahead_trust_rule": "bellman", "lcb_coef": 1.0},
     ],
 )
 def test_update_matches_reference(kwargs):
@@ -390,14 +397,15 @@ def test_compiled_mish_equals_mish():
 
 @pytest.mark.slow  # torch.compile for minutes; the fallback path: test_compile_update_falls_back_to_eager
 @pytest.mark.parametrize(
-    "cudagraph_path, critic_diversity, model_td_weight, lookahead_actions, bc_weight_temp, lookahead_trust_margin",
+    "cudagraph_path, critic_diversity, model_td_weight, lookahead_actions, bc_weight_temp, lookahead_trust",
     [
         (False, 0.0, 0.0, "actor", None, None),
         (True, 0.0, 0.0, "actor", None, None),
         (False, 0.5, 1.0, "actor", None, None),
         (False, 0.0, 0.0, "ema", None, None),
         (False, 0.0, 0.0, "actor", 1.0, None),
-        (False, 0.0, 0.0, "actor", None, 0.0),
+        pytest.param(False, 0.0, 0.0, "actor", None, (0.0, "value"), id="trust-value"),
+        pytest.param(False, 0.0, 0.0, "actor", None, (0.0, "bellman"), id="trust-bellman"),
     ],
 )
 def test_compiled_update_matches_eager(
@@ -407,7 +415,7 @@ def test_compiled_update_matches_eager(
     model_td_weight,
     lookahead_actions,
     bc_weight_temp,
-    lookahead_trust_margin,
+    lookahead_trust,
 ):
     """``compile_update=True`` (torch.compile of both losses, forward and backward) == the eager update, step by step.
 
@@ -417,8 +425,8 @@ def test_compiled_update_matches_eager(
     (sb3_pola.common.input_gradients), which a compiled graph differentiates once; with ``model_td_weight`` it also
     holds the model rollouts' TD loss; with ``lookahead_actions="ema"`` the EMA actor acts in the look-ahead, the
     gradient through the model; with ``bc_weight_temp`` the imitation term's advantage weights (the EMA actor's chain
-    and a critic call inside the BC graph); with ``lookahead_trust_margin`` the look-ahead's mask from the critic's
-    own values.
+    and a critic call inside the BC graph); with ``lookahead_trust`` (margin, rule) the look-ahead's mask from the
+    critic's own values (and, by the Bellman rule, the model's rewards).
     """
     from torch._dynamo.utils import counters
 
@@ -440,7 +448,8 @@ def test_compiled_update_matches_eager(
         lookahead_actions=lookahead_actions,
         backprop_through_model=lookahead_actions == "ema",
         bc_weight_temp=bc_weight_temp,
-        lookahead_trust_margin=lookahead_trust_margin,
+        lookahead_trust_margin=lookahead_trust[0] if lookahead_trust else None,
+        lookahead_trust_rule=lookahead_trust[1] if lookahead_trust else "value",
     )
     # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
     th._dynamo.reset()

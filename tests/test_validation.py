@@ -45,6 +45,7 @@ BAD_ARGUMENTS: list[tuple[dict[str, Any], str]] = [
     ({"lookahead_uncertainty_penalty": -0.5}, "lookahead_uncertainty_penalty must be"),
     ({"lookahead_uncertainty_cutoff": 0.0}, "lookahead_uncertainty_cutoff must be None or a number > 0.0"),
     ({"lookahead_trust_margin": 0.1, "lookahead_target": "value_expansion"}, "lookahead_trust_margin judges Q"),
+    ({"lookahead_trust_rule": "q"}, "lookahead_trust_rule must be one of"),
     ({"lcb_coef": -1.0}, "lcb_coef must be None or a number >= 0.0"),
     ({"critic_layer_norm": "yes"}, "critic_layer_norm must be one of False, True"),
     ({"max_grad_norm": 0.0}, "max_grad_norm must be None or a number > 0.0"),
