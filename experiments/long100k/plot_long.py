@@ -16,7 +16,8 @@
   defaults, BC with the package's actor and d3rlpy's three, nothing else (the ``mode_*`` figures' curves without the
   defaults before);
 - ``dip30k`` (thirty-second pass): hopper/medium's first 30,000 steps (AMD collection), the defaults against
-  ``lookahead_trust_margin`` 0 and T = 0 (``amd_mode/dip30k.csv``) and BC with the package's actor.
+  ``lookahead_trust_margin`` 0 (by the value rule and, thirty-third pass, the Bellman rule) and T = 0
+  (``amd_mode/dip30k.csv``) and BC with the package's actor.
 
 ``--out PNG`` writes elsewhere. ``--table`` prints the figure's curves as a Markdown table instead: each seed's score
 at the budget's end (or at the last step it reached) and its mean over the evaluations from ``--late`` steps on
@@ -133,6 +134,7 @@ FIGURES = {
         [
             ("POLA defaults (T = 3)", "amd_mode/scores.csv", "T3", "tab:red", "-"),
             ("POLA T = 3, lookahead_trust_margin 0", "amd_mode/dip30k.csv", "T3-trust0", "tab:purple", "-"),
+            ("POLA T = 3, margin 0, Bellman rule", "amd_mode/dip30k.csv", "T3-trustbellman0", "tab:olive", "-"),
             ("POLA T = 0", "amd_mode/dip30k.csv", "T0", "tab:blue", "-"),
             ("BC, package actor", "amd_mode/bc_scores.csv", "BC", "tab:brown", "--"),
         ],

@@ -922,3 +922,15 @@ for s in 0 1; do
     "$PY" experiments/long100k/trust_gap.py "outputs/long100k/models/${d//\//_}__T3__seed$s.zip" "$d"
   done
 done
+# the option lookahead_trust_rule="bellman" (the same pass) at margin 0: hopper/medium's first 30,000 steps, seeds
+# 0-2, as the thirty-second pass's runs (rows appended to experiments/long100k/amd_mode/dip30k.csv, variant renamed
+# T3-trustbellman0), and a 10,000-step screen on halfcheetah/medium-replay and the U-maze, seed 0 (screen.jsonl
+# collection amd-trustbellman)
+for s in 0 1 2; do
+  OUT="$OUT/dip30k_trustbellman" STEPS=30000 EXTRA='{"lookahead_trust_margin": 0.0, "lookahead_trust_rule": "bellman"}' \
+    bash experiments/long100k/run.sh "$s" hopper/medium-v0
+done
+for d in halfcheetah/medium-replay-v0 pointmaze/umaze-v0; do
+  screen --dataset "$d" --seed 0 --rules mode --name TRBRNW \
+    --kwargs "{$RNW, \"lookahead_trust_margin\": 0.0, \"lookahead_trust_rule\": \"bellman\"}"
+done
