@@ -6,7 +6,8 @@ pieces (actor, dynamics model, critic ensemble) and two per-sample tests of a pr
 - value: the critic's pessimistic ``Q(s_i, a_i) <= Q(s_t, a_t)`` (``lookahead_trust_margin=0``);
 - Bellman: the value the rollout implies for ``s_t``, ``sum_{j<i} gamma^j r_j + gamma^i Q(s_i, a_i)`` (the model's
   rewards, counted while the rollout is alive), ``<= Q(s_t, a_t)``: a better future the critic already counts at
-  ``s_t`` passes, a value that appears only at the predicted state does not.
+  ``s_t`` passes, a value that appears only at the predicted state does not (``lookahead_trust_rule="bellman"``,
+  which this measurement preceded).
 
 One line per model: the spread of ``Q(s_i) - Q(s_t)`` in units of the batch's mean ``|Q(s_t)|`` (5th, 50th, 95th
 percentiles over samples and steps), each test's share kept, the share of samples on which they agree and the share
