@@ -153,15 +153,20 @@ OUT = {
 }
 
 
+def run_rows(path: pathlib.Path, dataset: str, variant: str, max_step: float) -> list[dict]:
+    """One variant's evaluation rows on one dataset up to ``max_step``; none without the file."""
+    rows = read_rows(path) if path.exists() else []
+    return [r for r in rows if r["dataset"] == dataset and r["variant"] == variant and r["step"] <= max_step]
+
+
 def curve(
     path: pathlib.Path, dataset: str, variant: str, max_step: float = float("inf")
 ) -> tuple[list[int], np.ndarray, np.ndarray, str] | None:
     """Steps, mean and std over seeds, and the number of seeds of one variant's evaluations up to ``max_step`` ("3",
     or "3 to 45000, then 1" while some seeds' runs are still short of the others'); None without a file or rows."""
     by_step: dict[int, list[float]] = defaultdict(list)
-    for row in read_rows(path) if path.exists() else []:
-        if row["dataset"] == dataset and row["variant"] == variant and row["step"] <= max_step:
-            by_step[row["step"]].append(row["score"])
+    for row in run_rows(path, dataset, variant, max_step):
+        by_step[row["step"]].append(row["score"])
     if not by_step:
         return None
     steps = sorted(by_step)
@@ -186,9 +191,8 @@ def seed_table(figure: str, late: int) -> str:
     for label, name, variant, _, _ in curves:
         by_seed: dict[int, dict[int, float]] = defaultdict(dict)
         path = HERE / name
-        for row in read_rows(path) if path.exists() else []:
-            if row["dataset"] == dataset and row["variant"] == variant and row["step"] <= budget:
-                by_seed[row["seed"]][row["step"]] = row["score"]
+        for row in run_rows(path, dataset, variant, budget):
+            by_seed[row["seed"]][row["step"]] = row["score"]
         if not by_seed:
             continue
         finals, late_means = [], []
