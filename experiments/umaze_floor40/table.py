@@ -1,17 +1,22 @@
-"""The U-maze's imitation floor over 40 seeds (docs/results.md, twenty-seventh pass).
+"""The U-maze's imitation floor over 40 seeds (docs/results.md, twenty-seventh and thirty-fourth passes).
 
     python experiments/umaze_floor40/table.py
+    python experiments/umaze_floor40/table.py --screen amd-mode-seeds --rule mode
 
 Reads the final evaluations kept here (``bc_scores.csv``: BC with the package's actor; ``peers.csv``: d3rlpy's BC;
-``experiments/umaze_floor40/run.sh``) and prints markdown: every seed, mean ± sample std, the difference of the means
+``experiments/umaze_floor40/run.sh``), or with ``--screen`` the package's BC from the screens' rows
+(``experiments/policy_quality/screen.jsonl``, screen ``BCRNW`` of that collection, scored under ``--rule``), and
+prints markdown: every seed, mean ± sample std, the difference of the means
 with Welch's standard error and a bootstrap interval over seeds, and how the done-when's 3-seed comparison comes out
 on the disjoint triples of seeds (0-2, 3-5, ...): how often BC with the package's actor is at or above d3rlpy's BC.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import pathlib
+import sys
 
 import numpy as np
 
@@ -19,6 +24,9 @@ from sb3_pola.grid.report import fmt_rates, fmt_scores, summarize
 from sb3_pola.grid.rows import read_rows
 
 HERE = pathlib.Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "policy_quality"))
+from screen_table import read as read_screens  # noqa: E402  (the screens' rows, one reader)
+
 STEPS = 10_000
 DATASET = "pointmaze/umaze-v0"
 METHODS = {
@@ -39,10 +47,23 @@ def finals(path: pathlib.Path, variant: str) -> tuple[dict[int, float], dict[int
     )
 
 
+def screened(collection: str, rule: str) -> tuple[dict[int, float], dict[int, float]]:
+    """``{seed: score}`` and ``{seed: success rate}`` of the BC screens (``BCRNW``) of a collection under ``rule``."""
+    cells = read_screens(HERE.parent / "policy_quality" / "screen.jsonl", ["BCRNW"], rule, collection)
+    rows = cells.get((DATASET, "BCRNW"), {})
+    return {s: r[rule] for s, r in rows.items()}, {s: r.get(f"{rule}_success", float("nan")) for s, r in rows.items()}
+
+
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--screen", default=None, help="the package's BC from the screens of this collection")
+    parser.add_argument("--rule", default="mode", help="with --screen: the evaluation rule's column")
+    args = parser.parse_args()
     scores, success = {}, {}
     for name, source in METHODS.items():
         scores[name], success[name] = finals(*source)
+    if args.screen is not None:
+        scores["BC, package actor"], success["BC, package actor"] = screened(args.screen, args.rule)
     seeds = sorted(set.intersection(*(set(s) for s in scores.values())))
     if not seeds:
         raise SystemExit("no seed has both methods' final evaluations: run experiments/umaze_floor40/run.sh first")
