@@ -937,9 +937,9 @@ done
 # --- thirty-fourth pass (stop 61): the README's many-seed claims at the current defaults and rule (the mode): BC with
 # the package's actor on the U-maze, seeds 0-39 (against experiments/umaze_floor40/'s d3rlpy BC; table: python
 # experiments/umaze_floor40/table.py --screen amd-mode-seeds --rule mode); hopper/medium (the SEED=0 file) seeds 3-7 of
-# BC, the defaults and T = 0; the look-ahead on the medium maze (seeds 3-7) and the U-maze (seeds 3-5). Seeds 0-2 of
-# the last two are the thirty-first pass's models (mode_first10). The screens use the dataset's shared dynamics fit
-# (OUT/<dataset>/dynamics.pt, the seed-0 screen's). Rows in screen.jsonl, collection amd-mode-seeds; tables: python
+# BC, the defaults and T = 0; the look-ahead on the medium maze and hopper/medium-replay (seeds 3-7) and the U-maze
+# (seeds 3-5). Seeds 0-2 of hopper/medium and the look-ahead are the thirty-first pass's models (mode_first10). The
+# screens use the dataset's shared dynamics fit (OUT/<dataset>/dynamics.pt, the seed-0 screen's). Rows in screen.jsonl, collection amd-mode-seeds; tables: python
 # experiments/policy_quality/more_seeds.py --screen experiments/policy_quality/screen.jsonl --dataset D --names T0RNW
 # RNW BCRNW --paired --source amd-mode-50ep mode_first10 --source amd-mode-seeds mode (hopper/medium: add --peers
 # experiments/hopper/grid10k_amd/medium{,_seeds3-7}/peers.csv --variants d3rlpy-BC)
@@ -952,6 +952,8 @@ for s in 3 4 5 6 7; do
   screen --dataset hopper/medium-v0 --seed "$s" --rules mode --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
   screen --dataset pointmaze/medium-v0 --seed "$s" --rules mode,obsnoise --name RNW --kwargs "{$RNW}"
   screen --dataset pointmaze/medium-v0 --seed "$s" --rules mode,obsnoise --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name RNW --kwargs "{$RNW}"
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
 done
 for s in 3 4 5; do
   screen --dataset pointmaze/umaze-v0 --seed "$s" --rules mode,obsnoise --name RNW --kwargs "{$RNW}"
