@@ -1191,9 +1191,9 @@ class POLA(OfflineAlgorithm):
                 judged = q_pess[1:]  # [T, B]
                 if getattr(self, "lookahead_trust_rule", "value") == "bellman":  # old models: "value"
                     # the rollout read as the critic's own chain: sum_{j<i} gamma^j r_j + gamma^i Q(s_i, a_i)
-                    powers_ = self._gamma_powers[:, None]  # [T+1, 1]
-                    paid = th.cumsum(powers_[:-1] * alive_mask[:-1] * th.stack(rewards), dim=0)  # [T, B]
-                    judged = paid + powers_[1:] * judged
+                    discounts = self._gamma_powers[:, None]  # [T+1, 1]: gamma^i
+                    paid = th.cumsum(discounts[:-1] * alive_mask[:-1] * th.stack(rewards), dim=0)  # [T, B]
+                    judged = paid + discounts[1:] * judged
                 trusted = (judged <= bound).float()  # [T, B]
                 q_all = (alive_mask * q_pess).mean(dim=1)  # [T+1]: the diagnostics keep every alive term
             counted = alive_mask * th.cat([th.ones_like(trusted[:1]), trusted])  # [T+1, B]
