@@ -221,6 +221,30 @@ def test_lookahead_trust_margin(pendulum_path, rule):
     assert shares == sorted(shares) and any(0.0 < share < 1.0 for share in shares)
 
 
+def test_critic_bc_coef_penalises_the_target_at_the_data_next_action(pendulum_path):
+    """ReBRAC's critic penalty: training hands the critic loss each row's next action in its episode and a mask that
+    is 0 at the episode's last row; without the option it hands nothing."""
+    calls: dict[float, list] = {}
+    for coef in (0.0, 0.3):
+        model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=0, critic_bc_coef=coef))
+        critic_loss, seen = model._critic_loss_fn, calls.setdefault(coef, [])
+
+        def spy(*args, critic_loss=critic_loss, seen=seen):
+            seen.append(args[-2:])
+            return critic_loss(*args)
+
+        model._critic_loss_fn = spy
+        model.learn(2)
+    assert calls[0.0] == [(None, None), (None, None)]
+    next_actions, goes_on = model._next_data_actions
+    ends = model._offline_data.episode_ends()
+    assert 0 < ends.sum() < len(ends) and goes_on.tolist() == (~ends).astype(float).tolist()
+    within = th.as_tensor(~ends[:-1])
+    assert th.equal(next_actions[:-1][within], model.replay_buffer.actions[1:][within])
+    batch = light_kwargs()["batch_size"]
+    assert [(a.shape, m.shape) for a, m in calls[0.3]] == [((batch, 1), (batch,))] * 2
+
+
 # ---------------------------------------------------------------- the dynamics model's mean fit
 def _loss_terms(mean_loss: str, beta: float = 0.5):
     th.manual_seed(0)

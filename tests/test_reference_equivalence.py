@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import math
 
+import numpy as np
 import pytest
 import torch as th
 from helpers import model_on_dataset
@@ -29,6 +30,9 @@ RTOL, ATOL = 1e-4, 1e-5
 
 def _model(**kwargs):
     data = synthetic_dataset(2_000, 5, 2, env_id="Hopper-v5" if kwargs.pop("hopper", False) else None)
+    if kwargs.get("critic_bc_coef"):  # episodes of 7 rows, each row's next state the next row's state
+        goes_on = np.arange(len(data) - 1) % 7 != 6
+        data.next_observations[:-1][goes_on] = data.observations[1:][goes_on]
     params = dict(
         n_critics=4,
         top_k=2,
@@ -74,14 +78,27 @@ def ref_sample(actor, features: th.Tensor, generator: th.Generator | None = None
     return x.clamp(-1.0, 1.0)
 
 
-def reference_step(model, policy, batch) -> dict[str, object]:
+def ref_next_data_actions(data, indices: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+    """The data's next action of each row and 1 where its episode goes on (the next row starts at its next state)."""
+    next_actions, goes_on = [], []
+    for i in indices.tolist():
+        last = i == len(data) - 1 or bool(data.dones[i]) or not np.array_equal(data.next_observations[i], data.observations[i + 1])
+        next_actions.append(data.actions[i if last else i + 1])
+        goes_on.append(0.0 if last else 1.0)
+    return th.as_tensor(np.stack(next_actions), dtype=th.float32), th.tensor(goes_on)
+
+
+def reference_step(model, policy, batch, next_data=None) -> dict[str, object]:
     """One POLA update written plainly from the paper: critic TD step, actor ``L_d + eta L_q``, EMA and targets."""
     obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
     rewards, dones = batch.rewards.flatten(), batch.dones.flatten()
     actor, critic = policy.actor, policy.critic
     feats = policy.features_extractor
     with th.no_grad():
-        next_q = ref_q(policy.critic_target, next_obs, ref_sample(policy.actor_ema, feats(next_obs))).min(dim=0).values
+        next_actions = ref_sample(policy.actor_ema, feats(next_obs))
+        next_q = ref_q(policy.critic_target, next_obs, next_actions).min(dim=0).values
+        if next_data is not None:  # ReBRAC's critic penalty on a' away from the data's next action
+            next_q = next_q - model.critic_bc_coef * next_data[1] * ((next_actions - next_data[0]) ** 2).sum(dim=-1)
         target = rewards + model.gamma * (1.0 - dones) * next_q
     n = critic.n_critics
     # each member its own copy of the state features and the action, for the similarity term's gradients
@@ -216,6 +233,9 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         # or where the value the rollout implies for the current state is (the model's rewards on the way)
         {"lookahead_trust_margin": 0.0, "lookahead_trust_rule": "bellman"},
         {"lookahead_trust_margin": 0.005, "lookahead_trust_rule": "bellman", "lcb_coef": 1.0},
+        # ReBRAC's critic penalty
+        {"critic_bc_coef": 0.5},
+        {"critic_bc_coef": 2.0, "rollout_length": 0},
     ],
 )
 def test_update_matches_reference(kwargs):
@@ -226,13 +246,20 @@ def test_update_matches_reference(kwargs):
     model._current_progress_remaining = 0.6
     buffer = model._setup_offline_data()
     th.manual_seed(0)
-    batch = buffer.sample(32)
+    indices = buffer.sample_indices(32)
+    batch = buffer._get_samples(indices)
+    next_data = None
+    if model.critic_bc_coef > 0:
+        model._next_data_actions = model._next_actions()
+        next_data = tuple(x[indices] for x in model._next_data_actions)
+        ref_next = ref_next_data_actions(model._offline_data, indices)
+        assert 0 < float(ref_next[1].sum()) < 32  # rows at episode ends and rows within episodes
     th.manual_seed(1)
-    stats = model._update(batch)
+    stats = model._update(batch, next_data=next_data)
     critic_grads = [p.grad for p in policy.critic.parameters()]
     actor_grads = [p.grad for p in policy.actor.parameters()]
     th.manual_seed(1)
-    ref = reference_step(model, ref_policy, batch)
+    ref = reference_step(model, ref_policy, batch, None if next_data is None else ref_next)
     for key in ("critic_loss", "bc_loss", "q_loss", "actor_loss"):
         _close(stats[key], ref[key])
     for got, want in zip(critic_grads + actor_grads, ref["critic_grads"] + ref["actor_grads"], strict=True):
@@ -406,6 +433,7 @@ def test_compiled_mish_equals_mish():
         (False, 0.0, 0.0, "actor", 1.0, None),
         pytest.param(False, 0.0, 0.0, "actor", None, (0.0, "value"), id="trust-value"),
         pytest.param(False, 0.0, 0.0, "actor", None, (0.0, "bellman"), id="trust-bellman"),
+        pytest.param(False, 0.0, 0.0, "actor", None, "critic-bc", id="critic-bc"),
     ],
 )
 def test_compiled_update_matches_eager(
@@ -426,7 +454,8 @@ def test_compiled_update_matches_eager(
     holds the model rollouts' TD loss; with ``lookahead_actions="ema"`` the EMA actor acts in the look-ahead, the
     gradient through the model; with ``bc_weight_temp`` the imitation term's advantage weights (the EMA actor's chain
     and a critic call inside the BC graph); with ``lookahead_trust`` (margin, rule) the look-ahead's mask from the
-    critic's own values (and, by the Bellman rule, the model's rewards).
+    critic's own values (and, by the Bellman rule, the model's rewards); ``"critic-bc"`` in its place: ReBRAC's
+    critic penalty, the data's next actions in the critic's graph.
     """
     from torch._dynamo.utils import counters
 
@@ -448,23 +477,28 @@ def test_compiled_update_matches_eager(
         lookahead_actions=lookahead_actions,
         backprop_through_model=lookahead_actions == "ema",
         bc_weight_temp=bc_weight_temp,
-        lookahead_trust_margin=lookahead_trust[0] if lookahead_trust else None,
-        lookahead_trust_rule=lookahead_trust[1] if lookahead_trust else "value",
     )
+    if lookahead_trust == "critic-bc":
+        kwargs["critic_bc_coef"] = 0.5
+    elif lookahead_trust:
+        kwargs.update(lookahead_trust_margin=lookahead_trust[0], lookahead_trust_rule=lookahead_trust[1])
     # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
     th._dynamo.reset()
     counters.clear()
     eager, compiled = _model(**kwargs), _model(compile_update=True, **kwargs)
     compiled.policy.load_state_dict(eager.policy.state_dict())
     buffer = eager._setup_offline_data()
+    next_actions = eager._next_actions() if eager.critic_bc_coef > 0 else None
     graphs = []
     for step in range(3):
         th.manual_seed(step)
-        batch = buffer.sample(32)
+        indices = buffer.sample_indices(32)
+        batch = buffer._get_samples(indices)
+        next_data = None if next_actions is None else tuple(x[indices] for x in next_actions)
         th.manual_seed(100 + step)
-        want = eager._update(batch)
+        want = eager._update(batch, next_data=next_data)
         th.manual_seed(100 + step)
-        got = compiled._update(batch)
+        got = compiled._update(batch, next_data=next_data)
         for key in want:
             _close(got[key], want[key])
         for model in (eager, compiled):

@@ -123,6 +123,7 @@ def check_pola_arguments(
     lookahead_trust_margin: float | None,
     lookahead_trust_rule: str,
     lcb_coef: float | None,
+    critic_bc_coef: float,
     critic_layer_norm: bool,
     eta_gate: str | None,
     eta_gate_fraction: float,
@@ -186,6 +187,7 @@ def check_pola_arguments(
     check_float("lcb_coef", lcb_coef, low=0.0, optional=True)
     if lcb_coef is not None and n_critics < 2:
         raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
+    check_float("critic_bc_coef", critic_bc_coef, low=0.0)
     check_choice("critic_layer_norm", critic_layer_norm, (False, True))
     check_choice("eta_gate", eta_gate, ETA_GATES)
     check_float("eta_gate_fraction", eta_gate_fraction, low=0.0, low_open=True)
@@ -377,6 +379,12 @@ class POLA(OfflineAlgorithm):
         recovers, half of the look-ahead's cost (docs/results.md, thirty-third pass)
     :param lcb_coef: ``k`` of a lower confidence bound ``mean - k std`` over the ensemble used in the policy loss
         in place of the mean of the ``top_k`` smallest members (:func:`lookahead_q_objective`). ``None``: top-K
+    :param critic_bc_coef: ReBRAC's critic penalty ``beta``: the bootstrapped ``min_j Q'_j(s', a')`` pays
+        ``beta ||a' - a'_data||^2`` (summed over the action's dimensions, actions in [-1, 1]), ``a'_data`` the
+        data's own next action in the episode (no penalty at an episode's last step), in the critic's units, before
+        ``target_q_floor``. The target then values a policy that stays near the data's actions in the future, so the
+        Q term judges ``a`` by what follows it when the data's behaviour follows. ``0``: no penalty (the paper;
+        default). ReBRAC uses 0.01 on hopper-medium, 0.5 on hopper-medium-replay
     :param critic_layer_norm: LayerNorm in the critics' hidden layers (ReBRAC): it bounds Q off the data, so the Q term
         can pull at the paper's strength without the actor climbing the critic's extrapolation. Passed to the policy
         (a ``critic_layer_norm`` in ``policy_kwargs`` takes precedence). Default ``True``; ``False``: plain MLP
@@ -515,6 +523,7 @@ class POLA(OfflineAlgorithm):
         lookahead_trust_margin: float | None = None,
         lookahead_trust_rule: str = "value",
         lcb_coef: float | None = None,
+        critic_bc_coef: float = 0.0,
         critic_layer_norm: bool = True,
         eta_gate: str | None = "critic_maturity",
         eta_gate_fraction: float = 0.1,
@@ -569,6 +578,7 @@ class POLA(OfflineAlgorithm):
             lookahead_trust_margin=lookahead_trust_margin,
             lookahead_trust_rule=lookahead_trust_rule,
             lcb_coef=lcb_coef,
+            critic_bc_coef=critic_bc_coef,
             critic_layer_norm=critic_layer_norm,
             eta_gate=eta_gate,
             eta_gate_fraction=eta_gate_fraction,
@@ -638,6 +648,9 @@ class POLA(OfflineAlgorithm):
         self.lookahead_trust_margin = lookahead_trust_margin
         self.lookahead_trust_rule = lookahead_trust_rule
         self.lcb_coef = lcb_coef
+        self.critic_bc_coef = critic_bc_coef
+        # critic_bc_coef: the data's next action of every row, [N, A], and 1 where the episode goes on, [N]
+        self._next_data_actions: tuple[th.Tensor, th.Tensor] | None = None
         self.eta_gate = eta_gate
         self.eta_gate_fraction = eta_gate_fraction
         # "critic_maturity": the dataset's mean and lowest discounted return-to-go, set once the data are loaded
@@ -770,6 +783,7 @@ class POLA(OfflineAlgorithm):
             "_sample_target",
             "_critic_loss_fn",
             "_data_returns",
+            "_next_data_actions",
             "_goal_mask",
             "_n_imitation_rows",
             "_bc_loss_fn",
@@ -828,6 +842,8 @@ class POLA(OfflineAlgorithm):
                 self.data_value, self.data_value_floor = float(returns.mean()), float(returns.min())
             if init_needs:
                 self._shift_critic_output(float(returns.mean()))
+        if self.critic_bc_coef > 0 and self._next_data_actions is None:
+            self._next_data_actions = self._next_actions()
         if isinstance(self.critic_init_value, float | int) and self._n_updates == 0:
             self._shift_critic_output(float(self.critic_init_value))
         if self.lookahead_fixed_goal and self._goal_mask is None:
@@ -848,6 +864,16 @@ class POLA(OfflineAlgorithm):
         self.dynamics_fit_info = self._fit_or_load_dynamics(fit, fit_kwargs, arrays)
         dynamics.freeze()
         self.policy.dynamics_fitted.fill_(True)
+
+    def _next_actions(self) -> tuple[th.Tensor, th.Tensor]:
+        """``critic_bc_coef``'s data: every row's next action in its episode, ``[N, A]``, and ``[N]`` 1 where there is
+        one, 0 at an episode's last row (a terminal's target has no ``Q'``; a truncation's next action is not in the
+        data). The hindsight copies are episodes of their own (``episode_ends``)."""
+        buffer = self._setup_offline_data()
+        assert self._offline_data is not None
+        goes_on = th.as_tensor(~self._offline_data.episode_ends(), dtype=th.float32, device=self.device)  # [N]
+        following = th.arange(1, len(goes_on) + 1, device=self.device).clamp_max(len(goes_on) - 1)  # [N]
+        return buffer.actions[following], goes_on
 
     def _dynamics_arrays(self) -> list[th.Tensor]:
         """The transitions the dynamics model fits: ``s, a, s', r, done`` of the data's rows (the hindsight copies of
@@ -924,11 +950,12 @@ class POLA(OfflineAlgorithm):
         for _ in range(gradient_steps):
             indices = buffer.sample_indices(batch_size)
             returns = None if self._data_returns is None else self._data_returns[indices]
+            next_data = None if self._next_data_actions is None else tuple(x[indices] for x in self._next_data_actions)
             actor_batch = None
             if self._n_imitation_rows is not None:  # the hindsight copies train the critic, not the actor
                 actor_indices = buffer.sample_indices(batch_size, self._n_imitation_rows)
                 actor_batch = (buffer.observations[actor_indices], buffer.actions[actor_indices])
-            self._accumulate_train_stats(self._update(buffer._get_samples(indices), returns, actor_batch))
+            self._accumulate_train_stats(self._update(buffer._get_samples(indices), returns, actor_batch, next_data))
             self._n_updates += 1
 
     def _update(
@@ -936,19 +963,24 @@ class POLA(OfflineAlgorithm):
         batch: ReplayBufferSamples,
         returns: th.Tensor | None = None,
         actor_batch: tuple[th.Tensor, th.Tensor] | None = None,
+        next_data: tuple[th.Tensor, th.Tensor] | None = None,
     ) -> dict[str, th.Tensor]:
         """One POLA update on a batch: critic, actor with look-ahead, EMA, targets. Returns detached statistics.
 
         ``returns``: ``[B]`` the data's discounted returns-to-go of the batch's transitions (``target_q_floor="returns"``)
         ``actor_batch``: the actor's own ``(observations, actions)`` (``hindsight_goals``: rows of the data, not of its
         relabelled copies); the critic's by default
+        ``next_data``: ``critic_bc_coef``'s ``([B, A], [B])``, the data's next actions and where they exist
         """
         obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
         actor_obs, actor_actions = (obs, actions) if actor_batch is None else actor_batch
         rewards, dones = batch.rewards.flatten() * self.reward_scale, batch.dones.flatten()
 
         # critic: TD regression on the pessimistic target (section IV)
-        critic_loss, critic_stats = self._critic_loss_fn(obs, actions, next_obs, rewards, dones, returns)
+        next_data_actions, next_data_mask = (None, None) if next_data is None else next_data
+        critic_loss, critic_stats = self._critic_loss_fn(
+            obs, actions, next_obs, rewards, dones, returns, next_data_actions, next_data_mask
+        )
         self.critic.optimizer.zero_grad(set_to_none=True)
         critic_loss.backward()
         critic_grad_norm = self._clip(self.critic.parameters())
@@ -1046,11 +1078,16 @@ class POLA(OfflineAlgorithm):
         rewards: th.Tensor,
         dones: th.Tensor,
         returns: th.Tensor | None = None,
+        next_data_actions: th.Tensor | None = None,
+        next_data_mask: th.Tensor | None = None,
     ) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """TD loss of every ensemble member on the pessimistic target, min over the target ensemble (section IV)."""
         with th.no_grad():
             next_actions = self._sample_target(self.policy.actor_features(next_obs))  # a' from the EMA actor
             next_q = self.critic_target(next_obs, next_actions).min(dim=0).values  # [B]
+            if next_data_actions is not None and next_data_mask is not None:  # ReBRAC: a' pays for leaving the data
+                distance = (next_actions - next_data_actions).pow(2).sum(dim=-1)  # [B]
+                next_q = next_q - self.critic_bc_coef * next_data_mask * distance
             if self.target_q_floor_value is not None:  # no policy's value lies below it: the rest is pessimism bias
                 next_q = next_q.clamp_min(self.target_q_floor_value)
             target_q = rewards + self.gamma * (1.0 - dones) * next_q  # [B]
