@@ -82,7 +82,8 @@ def ref_next_data_actions(data, indices: th.Tensor) -> tuple[th.Tensor, th.Tenso
     """The data's next action of each row and 1 where its episode goes on (the next row starts at its next state)."""
     next_actions, goes_on = [], []
     for i in indices.tolist():
-        last = i == len(data) - 1 or bool(data.dones[i]) or not np.array_equal(data.next_observations[i], data.observations[i + 1])
+        last = i == len(data) - 1 or bool(data.dones[i])
+        last = last or not np.array_equal(data.next_observations[i], data.observations[i + 1])
         next_actions.append(data.actions[i if last else i + 1])
         goes_on.append(0.0 if last else 1.0)
     return th.as_tensor(np.stack(next_actions), dtype=th.float32), th.tensor(goes_on)
