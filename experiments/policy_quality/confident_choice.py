@@ -1,0 +1,80 @@
+"""#23: would POLA do better to act as BC where its critic is not sure its own action is better? An offline screen on
+saved models, no training.
+
+    MINARI_DATASETS_PATH=<data> python experiments/policy_quality/confident_choice.py --dataset hopper/medium-v0 \\
+        --seed 0 --pola OUT/hopper_medium-v0/RNW/seed0.zip --bc OUT/hopper_medium-v0/BCRNW/seed0.zip --k 0 1 2 \\
+        [--out rows.jsonl]
+
+At every state of the evaluation both models act under the package's rule (``predict(obs, deterministic=True)``) and
+POLA's critic ensemble judges the two actions member by member: ``d_j = Q_j(s, a_pola) - Q_j(s, a_bc)``. POLA's action
+is taken where ``mean_j d_j > k std_j d_j`` (a one-sided test over the members at ``k``), BC's elsewhere; ``k = 0`` is
+the argmax of the ensemble's mean over the two. 10 episodes on the score protocol's resets (as ``screen.py``: reset
+seed ``10000 (seed + 1) + i``) for each ``--k``; one JSON row per call (score, share of steps on POLA's action, the
+mazes' success rate), printed and appended to ``--out``. Training both actors at once is not a package option.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+import numpy as np
+import torch as th
+
+from sb3_pola import POLA
+from sb3_pola.common.datasets import load_offline_dataset, make_env
+from sb3_pola.common.evaluation import evaluate
+
+
+class ConfidentChoice:
+    """``predict`` of the choice between two models' actions (the interface :func:`evaluate` calls)."""
+
+    def __init__(self, pola: POLA, bc: POLA, k: float) -> None:
+        self.pola, self.bc, self.k = pola, bc, k
+        self.took_pola: list[bool] = []
+
+    def predict(self, obs: Any, deterministic: bool = True) -> tuple[np.ndarray, None]:
+        a_pola, _ = self.pola.predict(obs, deterministic=True)
+        a_bc, _ = self.bc.predict(obs, deterministic=True)
+        state, _ = self.pola.policy.obs_to_tensor(obs)  # [1, obs_dim]
+        actions = th.as_tensor(np.stack([a_pola, a_bc]), dtype=th.float32).reshape(2, -1)  # [2, act_dim]
+        with th.no_grad():
+            q = self.pola.policy.critic(state.expand(2, -1), actions)  # [N, 2]
+        gain = q[:, 0] - q[:, 1]  # [N]
+        take = bool(gain.mean() > self.k * gain.std())
+        self.took_pola.append(take)
+        return (a_pola if take else a_bc), None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", required=True)
+    parser.add_argument("--seed", type=int, required=True, help="the models' training seed (sets the resets)")
+    parser.add_argument("--pola", required=True, help="the POLA model's file")
+    parser.add_argument("--bc", required=True, help="the BC model's file (the package's actor, eta = 0)")
+    parser.add_argument("--k", type=float, nargs="+", default=[0.0, 1.0, 2.0])
+    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args()
+    th.set_num_threads(1)
+    data = load_offline_dataset(args.dataset)
+    pola, bc = POLA.load(args.pola, device="cpu"), POLA.load(args.bc, device="cpu")
+    env = make_env(data)
+    row: dict[str, Any] = {"dataset": args.dataset, "seed": args.seed}
+    for k in args.k:
+        choice, successes = ConfidentChoice(pola, bc, k), []
+        returns = evaluate(choice, env, args.episodes, 10_000 * (args.seed + 1), True, successes)
+        score = data.normalized_score(returns)
+        row[f"k{k:g}"] = round(score if score is not None else float(returns.mean()), 1)
+        row[f"k{k:g}_pola_share"] = round(float(np.mean(choice.took_pola)), 3)
+        if successes and successes[0] is not None:
+            row[f"k{k:g}_success"] = round(float(np.mean([bool(s) for s in successes])), 2)
+    print(json.dumps(row), flush=True)
+    if args.out:
+        with open(args.out, "a") as f:
+            f.write(json.dumps(row) + "\n")
+
+
+if __name__ == "__main__":
+    main()

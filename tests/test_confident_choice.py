@@ -1,0 +1,49 @@
+"""``experiments/policy_quality/confident_choice.py``: the choice between POLA's and BC's action by POLA's critic."""
+
+from __future__ import annotations
+
+import importlib.util
+import pathlib
+
+import numpy as np
+import torch as th
+from helpers import light_kwargs
+
+from sb3_pola import POLA
+
+SCRIPT = pathlib.Path(__file__).resolve().parents[1] / "experiments" / "policy_quality" / "confident_choice.py"
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("confident_choice", SCRIPT)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_choice_follows_the_members_test_of_the_gain(pendulum_path):
+    module = _script()
+    pola = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=0, n_critics=4))
+    bc = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(rollout_length=0, eta=0.0, seed=1))
+    observations = pola.replay_buffer.observations[:40].numpy()
+    for k in (-1e9, 1e9):  # every action POLA's, every action BC's
+        choice = module.ConfidentChoice(pola, bc, k)
+        for obs in observations:
+            action, _ = choice.predict(obs)
+            want = (pola if k < 0 else bc).predict(obs, deterministic=True)[0]
+            np.testing.assert_array_equal(action, want)
+        assert choice.took_pola == [k < 0] * len(observations)
+    ratios = []  # the members' mean gain over their spread at each state
+    for obs in observations:
+        a_pola, a_bc = (m.predict(obs, deterministic=True)[0] for m in (pola, bc))
+        with th.no_grad():
+            q = pola.policy.critic(th.as_tensor(np.stack([obs, obs])), th.as_tensor(np.stack([a_pola, a_bc])))
+        gain = q[:, 0] - q[:, 1]
+        ratios.append(float(gain.mean() / gain.std()))
+    k = float(np.median(ratios))  # in between: POLA's action where the ratio beats k, about half the states
+    choice = module.ConfidentChoice(pola, bc, k)
+    for obs in observations:
+        choice.predict(obs)
+    taken = [r > k for r in ratios]
+    assert choice.took_pola == taken and 0 < sum(taken) < len(taken)
