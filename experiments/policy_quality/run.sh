@@ -959,3 +959,37 @@ for s in 3 4 5; do
   screen --dataset pointmaze/umaze-v0 --seed "$s" --rules mode,obsnoise --name RNW --kwargs "{$RNW}"
   screen --dataset pointmaze/umaze-v0 --seed "$s" --rules mode,obsnoise --name T0RNW --kwargs "{$RNW, \"rollout_length\": 0}"
 done
+# --- thirty-fifth pass (stop 62): levers for hopper/medium's narrow file at seed 0 (batch 256, 2 x 256 critics; rows
+# in screen.jsonl, collection amd-critic-bc), the new option critic_bc_coef (ReBRAC's critic penalty) at 0.1 on the six
+# datasets (seeds 1-2 on the hopper files) and at 1.0 on the hopper files (seeds 0-2 on hopper/medium-replay) and
+# the U-maze. The screens use the dataset's shared dynamics fit (OUT/<dataset>/dynamics.pt, the seed-0 screen's).
+screen --dataset hopper/medium-v0 --seed 0 --rules mode --name B256 --kwargs "{$RNW, \"batch_size\": 256}"
+QF256='"compile_update": true, "use_state_products": false, "policy_kwargs": {"actor_activation_fn": "ReLU", "net_arch": {"pi": [256, 256], "qf": [256, 256]}}'
+for d in hopper/medium-v0 hopper/medium-replay-v0 pointmaze/umaze-v0; do
+  screen --dataset "$d" --seed 0 --rules mode --name Q256 --kwargs "{$QF256}"
+done
+for d in hopper/medium-v0 hopper/medium-replay-v0 pointmaze/umaze-v0 halfcheetah/medium-replay-v0 pointmaze/medium-v0 halfcheetah/medium-v0; do
+  screen --dataset "$d" --seed 0 --rules mode --name CB0.1 --kwargs "{$RNW, \"critic_bc_coef\": 0.1}"
+done
+for s in 1 2; do
+  for d in hopper/medium-v0 hopper/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules mode --name CB0.1 --kwargs "{$RNW, \"critic_bc_coef\": 0.1}"
+  done
+done
+screen --dataset hopper/medium-v0 --seed 0 --rules mode --name CB1 --kwargs "{$RNW, \"critic_bc_coef\": 1.0}"
+screen --dataset pointmaze/umaze-v0 --seed 0 --rules mode --name CB1 --kwargs "{$RNW, \"critic_bc_coef\": 1.0}"
+for s in 0 1 2; do
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name CB1 --kwargs "{$RNW, \"critic_bc_coef\": 1.0}"
+done
+# the same pass, offline on the thirty-first pass's saved models (OUT/<dataset>/{RNW,BCRNW}/seed<S>.zip, seeds 0-2):
+# what the models' actions move off the data's (action_shift.py) and the choice between POLA's and BC's action by
+# POLA's critic members (confident_choice.py; rows in experiments/policy_quality/confident_choice.jsonl)
+for d in hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+  "$PY" experiments/policy_quality/action_shift.py --dataset "$d" "$OUT/${d//\//_}"/{BCRNW,RNW}/seed{0,1,2}.zip
+done
+for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 hopper/medium-replay-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
+  for s in 0 1 2; do
+    "$PY" experiments/policy_quality/confident_choice.py --dataset "$d" --seed "$s" --k 0 1 2 3 \
+      --pola "$OUT/${d//\//_}/RNW/seed$s.zip" --bc "$OUT/${d//\//_}/BCRNW/seed$s.zip" --out "$OUT/confident_choice.jsonl"
+  done
+done

@@ -950,7 +950,9 @@ class POLA(OfflineAlgorithm):
         for _ in range(gradient_steps):
             indices = buffer.sample_indices(batch_size)
             returns = None if self._data_returns is None else self._data_returns[indices]
-            next_data = None if self._next_data_actions is None else tuple(x[indices] for x in self._next_data_actions)
+            next_data = None
+            if self._next_data_actions is not None:
+                next_data = (self._next_data_actions[0][indices], self._next_data_actions[1][indices])
             actor_batch = None
             if self._n_imitation_rows is not None:  # the hindsight copies train the critic, not the actor
                 actor_indices = buffer.sample_indices(batch_size, self._n_imitation_rows)
