@@ -36,8 +36,8 @@ def test_eta_schedule_is_followed_during_learn(pendulum_path, tmp_path):
     etas = []
     real_update = model._update
 
-    def spy(batch, returns=None, actor_batch=None):
-        stats = real_update(batch, returns, actor_batch)
+    def spy(batch, returns=None, actor_batch=None, next_data=None):
+        stats = real_update(batch, returns, actor_batch, next_data)
         etas.append(float(stats["eta"]))
         return stats
 
