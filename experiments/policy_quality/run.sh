@@ -993,3 +993,13 @@ for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 hop
       --pola "$OUT/${d//\//_}/RNW/seed$s.zip" --bc "$OUT/${d//\//_}/BCRNW/seed$s.zip" --out "$OUT/confident_choice.jsonl"
   done
 done
+# and on the thirty-fourth pass's models: hopper/medium seeds 3-7, the U-maze seeds 3-5 (rows appended to
+# confident_choice.jsonl with the collection amd-mode-seeds)
+for s in 3 4 5 6 7; do
+  "$PY" experiments/policy_quality/confident_choice.py --dataset hopper/medium-v0 --seed "$s" --k 0 1 2 3 \
+    --pola "$OUT/hopper_medium-v0/RNW/seed$s.zip" --bc "$OUT/hopper_medium-v0/BCRNW/seed$s.zip" --out "$OUT/confident_choice.jsonl"
+done
+for s in 3 4 5; do
+  "$PY" experiments/policy_quality/confident_choice.py --dataset pointmaze/umaze-v0 --seed "$s" --k 0 1 2 \
+    --pola "$OUT/pointmaze_umaze-v0/RNW/seed$s.zip" --bc "$OUT/pointmaze_umaze-v0/BCRNW/seed$s.zip" --out "$OUT/confident_choice.jsonl"
+done
