@@ -1003,3 +1003,12 @@ for s in 3 4 5; do
   "$PY" experiments/policy_quality/confident_choice.py --dataset pointmaze/umaze-v0 --seed "$s" --k 0 1 2 \
     --pola "$OUT/pointmaze_umaze-v0/RNW/seed$s.zip" --bc "$OUT/pointmaze_umaze-v0/BCRNW/seed$s.zip" --out "$OUT/confident_choice.jsonl"
 done
+# BC with the package's actor, seeds 3-7, on the medium maze and hopper/medium-replay (screen rows, collection
+# amd-mode-seeds), then the choice on those seeds beside the thirty-fourth pass's POLA models
+for s in 3 4 5 6 7; do
+  for d in pointmaze/medium-v0 hopper/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules mode,obsnoise --name BCRNW --kwargs "$BCK"
+    "$PY" experiments/policy_quality/confident_choice.py --dataset "$d" --seed "$s" --k 0 1 2 \
+      --pola "$OUT/${d//\//_}/RNW/seed$s.zip" --bc "$OUT/${d//\//_}/BCRNW/seed$s.zip" --out "$OUT/confident_choice.jsonl"
+  done
+done
