@@ -236,7 +236,7 @@ def test_critic_bc_coef_penalises_the_target_at_the_data_next_action(pendulum_pa
         model._critic_loss_fn = spy
         model.learn(2)
     assert calls[0.0] == [(None, None), (None, None)]
-    next_actions, goes_on = model._next_data_actions
+    next_actions, goes_on = model._next_data(th.arange(len(model.replay_buffer.actions)))
     ends = model._offline_data.episode_ends()
     assert 0 < ends.sum() < len(ends) and goes_on.tolist() == (~ends).astype(float).tolist()
     within = th.as_tensor(~ends[:-1])

@@ -251,8 +251,8 @@ def test_update_matches_reference(kwargs):
     batch = buffer._get_samples(indices)
     next_data = None
     if model.critic_bc_coef > 0:
-        model._next_data_actions = model._next_actions()
-        next_data = tuple(x[indices] for x in model._next_data_actions)
+        model._next_data_mask = model._episode_goes_on()
+        next_data = model._next_data(indices)
         ref_next = ref_next_data_actions(model._offline_data, indices)
         assert 0 < float(ref_next[1].sum()) < 32  # rows at episode ends and rows within episodes
     th.manual_seed(1)
@@ -489,13 +489,14 @@ def test_compiled_update_matches_eager(
     eager, compiled = _model(**kwargs), _model(compile_update=True, **kwargs)
     compiled.policy.load_state_dict(eager.policy.state_dict())
     buffer = eager._setup_offline_data()
-    next_actions = eager._next_actions() if eager.critic_bc_coef > 0 else None
+    if eager.critic_bc_coef > 0:
+        eager._next_data_mask = eager._episode_goes_on()
     graphs = []
     for step in range(3):
         th.manual_seed(step)
         indices = buffer.sample_indices(32)
         batch = buffer._get_samples(indices)
-        next_data = None if next_actions is None else tuple(x[indices] for x in next_actions)
+        next_data = None if eager._next_data_mask is None else eager._next_data(indices)
         th.manual_seed(100 + step)
         want = eager._update(batch, next_data=next_data)
         th.manual_seed(100 + step)

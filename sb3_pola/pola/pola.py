@@ -649,8 +649,8 @@ class POLA(OfflineAlgorithm):
         self.lookahead_trust_rule = lookahead_trust_rule
         self.lcb_coef = lcb_coef
         self.critic_bc_coef = critic_bc_coef
-        # critic_bc_coef: the data's next action of every row, [N, A], and 1 where the episode goes on, [N]
-        self._next_data_actions: tuple[th.Tensor, th.Tensor] | None = None
+        # critic_bc_coef: 1 where a row's episode goes on (its next action is the next row's), [N]
+        self._next_data_mask: th.Tensor | None = None
         self.eta_gate = eta_gate
         self.eta_gate_fraction = eta_gate_fraction
         # "critic_maturity": the dataset's mean and lowest discounted return-to-go, set once the data are loaded
@@ -783,7 +783,7 @@ class POLA(OfflineAlgorithm):
             "_sample_target",
             "_critic_loss_fn",
             "_data_returns",
-            "_next_data_actions",
+            "_next_data_mask",
             "_goal_mask",
             "_n_imitation_rows",
             "_bc_loss_fn",
@@ -842,8 +842,8 @@ class POLA(OfflineAlgorithm):
                 self.data_value, self.data_value_floor = float(returns.mean()), float(returns.min())
             if init_needs:
                 self._shift_critic_output(float(returns.mean()))
-        if self.critic_bc_coef > 0 and self._next_data_actions is None:
-            self._next_data_actions = self._next_actions()
+        if self.critic_bc_coef > 0 and self._next_data_mask is None:
+            self._next_data_mask = self._episode_goes_on()
         if isinstance(self.critic_init_value, float | int) and self._n_updates == 0:
             self._shift_critic_output(float(self.critic_init_value))
         if self.lookahead_fixed_goal and self._goal_mask is None:
@@ -865,15 +865,20 @@ class POLA(OfflineAlgorithm):
         dynamics.freeze()
         self.policy.dynamics_fitted.fill_(True)
 
-    def _next_actions(self) -> tuple[th.Tensor, th.Tensor]:
-        """``critic_bc_coef``'s data: every row's next action in its episode, ``[N, A]``, and ``[N]`` 1 where there is
-        one, 0 at an episode's last row (a terminal's target has no ``Q'``; a truncation's next action is not in the
-        data). The hindsight copies are episodes of their own (``episode_ends``)."""
-        buffer = self._setup_offline_data()
+    def _episode_goes_on(self) -> th.Tensor:
+        """``[N]`` 1 where a row's episode goes on, so its next action is the next row's; 0 at an episode's last row
+        (a terminal's target has no ``Q'``; a truncation's next action is not in the data). The hindsight copies are
+        episodes of their own (``episode_ends``)."""
+        self._setup_offline_data()
         assert self._offline_data is not None
-        goes_on = th.as_tensor(~self._offline_data.episode_ends(), dtype=th.float32, device=self.device)  # [N]
-        following = th.arange(1, len(goes_on) + 1, device=self.device).clamp_max(len(goes_on) - 1)  # [N]
-        return buffer.actions[following], goes_on
+        return th.as_tensor(~self._offline_data.episode_ends(), dtype=th.float32, device=self.device)
+
+    def _next_data(self, indices: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        """``critic_bc_coef``'s batch: the data's next action of each row, ``[B, A]`` (the next row's; any action at an
+        episode's last row), and ``[B]`` 1 where it is one (:meth:`_episode_goes_on`)."""
+        assert self._next_data_mask is not None
+        actions = self._setup_offline_data().actions
+        return actions[(indices + 1).clamp_max(len(actions) - 1)], self._next_data_mask[indices]
 
     def _dynamics_arrays(self) -> list[th.Tensor]:
         """The transitions the dynamics model fits: ``s, a, s', r, done`` of the data's rows (the hindsight copies of
@@ -950,9 +955,7 @@ class POLA(OfflineAlgorithm):
         for _ in range(gradient_steps):
             indices = buffer.sample_indices(batch_size)
             returns = None if self._data_returns is None else self._data_returns[indices]
-            next_data = None
-            if self._next_data_actions is not None:
-                next_data = (self._next_data_actions[0][indices], self._next_data_actions[1][indices])
+            next_data = None if self._next_data_mask is None else self._next_data(indices)
             actor_batch = None
             if self._n_imitation_rows is not None:  # the hindsight copies train the critic, not the actor
                 actor_indices = buffer.sample_indices(batch_size, self._n_imitation_rows)
