@@ -7,7 +7,8 @@ and their kernel mode (``deterministic_rule="mode"``, the default), once (``"obs
 (``"noise_free"``), the clip to ``[-1, 1]`` and the rescaling to the
 action space's bounds. With ``n_action_samples > 1`` (the Q-ranked rule) the graph also holds the target critics:
 it runs the chain for the ``n`` candidates of ``predict`` (their fixed noise held as a buffer) and keeps the one
-with the highest minimum over the ensemble. Input ``obs`` ``[batch, obs_dim]`` (float32), output
+with the highest minimum over the ensemble. With ``fallback_confidence`` (the confident choice) it holds the
+imitation actor's chain too, and the critics that choose between the two actions. Input ``obs`` ``[batch, obs_dim]`` (float32), output
 ``action`` ``[batch, action_dim]``, with a dynamic batch dimension.
 
 ``sb3-pola export MODEL.zip OUT [--format onnx|torchscript]``.
@@ -57,6 +58,8 @@ class DeterministicPolicyGraph(nn.Module):
     :func:`export_policy`.
 
     :param policy: the policy to reproduce (finite action bounds)
+    :param actor: the actor whose chain the graph runs (``None``: the predict actor, with the fallback actor's own
+        graph and the choice between them where the policy has ``fallback_confidence``)
     """
 
     obs_mean: th.Tensor
@@ -75,12 +78,21 @@ class DeterministicPolicyGraph(nn.Module):
     noise_offset: th.Tensor
     candidate_noise: th.Tensor
 
-    def __init__(self, policy: POLAPolicy) -> None:
+    def __init__(self, policy: POLAPolicy, actor: DiffusionActor | None = None) -> None:
         super().__init__()
         check_exportable(policy)
         extractor = policy.features_extractor
         assert isinstance(extractor, StateProductsExtractor)
-        actor = policy.actor_ema if policy.predict_actor == "ema" else policy.actor
+        # fallback_confidence: the imitation actor's chain as a graph of its own, and the critics that choose
+        self.fallback: DeterministicPolicyGraph | None = None
+        self.choice_critic: EnsembleCritic | None = None
+        self.fallback_confidence = policy.fallback_confidence
+        if actor is None:
+            actor = policy.actor_ema if policy.predict_actor == "ema" else policy.actor
+            fallback_actor = policy.fallback_actor_ema if policy.predict_actor == "ema" else policy.fallback_actor
+            if fallback_actor is not None:
+                self.fallback = DeterministicPolicyGraph(policy, fallback_actor)
+                self.choice_critic = _exportable_critic(policy.critic)
         with th.no_grad():
             self.register_buffer("obs_mean", extractor.obs_mean.detach().cpu().float().clone())
             self.register_buffer("obs_std", extractor.obs_std.detach().cpu().float().clone())
@@ -155,17 +167,32 @@ class DeterministicPolicyGraph(nn.Module):
         x = (obs.float() - self.obs_mean) / self.obs_std  # [B, n]
         if self.use_state_products:
             x = th.cat((x, x[:, self.idx_i] * x[:, self.idx_j]), dim=-1)  # [B, n + n(n-1)/2]
-        if self.critic is not None:
-            action = self._best_candidate(obs.float(), x)
-        elif self.mode_samples:
-            action = self._mode(obs.float(), x)
-        else:
-            noise = None  # the noise-free chain from a_T = 0
-            if self.observation_noise:  # the observation's own chain noise, as predict draws it
-                noise = noise_from_projection(obs.float(), self.noise_projection, self.noise_offset, self.n_diffusion_steps)
-            action = run_plan(self.plan(), x, noise)  # clipped to [-1, 1]
+        action = self._action(obs.float(), x)
+        if self.fallback is not None:
+            action = self._confident_choice(obs.float(), action, self.fallback._action(obs.float(), x))
         # SB3's unscale_action: [-1, 1] -> [low, high]
         return self.action_low + 0.5 * (action + 1.0) * (self.action_high - self.action_low)
+
+    def _action(self, obs: th.Tensor, x: th.Tensor) -> th.Tensor:
+        """The actor's action in ``[-1, 1]`` by the policy's rule, ``x`` the actor's state features."""
+        if self.critic is not None:
+            return self._best_candidate(obs, x)
+        if self.mode_samples:
+            return self._mode(obs, x)
+        noise = None  # the noise-free chain from a_T = 0
+        if self.observation_noise:  # the observation's own chain noise, as predict draws it
+            noise = noise_from_projection(obs, self.noise_projection, self.noise_offset, self.n_diffusion_steps)
+        return run_plan(self.plan(), x, noise)  # clipped to [-1, 1]
+
+    def _confident_choice(self, obs: th.Tensor, action: th.Tensor, fallback: th.Tensor) -> th.Tensor:
+        """``predict``'s confident choice (:meth:`~sb3_pola.pola.policies.POLAPolicy.confident_choice`)."""
+        assert self.choice_critic is not None and self.fallback_confidence is not None
+        b = obs.shape[0]
+        q = self.choice_critic(th.cat([obs, obs]), th.cat([action, fallback]))  # [N, 2B]
+        q = q.view(q.shape[0], 2, b)  # [N, 2, B]: the action's, then the fallback's
+        gain = q[:, 0] - q[:, 1]  # [N, B]
+        take = gain.mean(dim=0) > self.fallback_confidence * gain.std(dim=0)  # [B]
+        return th.where(take.unsqueeze(1), action, fallback)
 
     def _mode(self, obs: th.Tensor, x: th.Tensor) -> th.Tensor:
         """``predict``'s mode rule: ``k`` chains per state with the observation's own noise, their kernel mode."""
@@ -228,6 +255,19 @@ def check_exportable(policy: Any) -> None:
             *(
                 [(policy.critic_target, EnsembleCritic, ("forward", "inputs", "q_values"))]
                 if policy.n_action_samples > 1
+                else []
+            ),
+            # the confident choice runs the fallback actor and the critics
+            *(
+                [
+                    (
+                        policy.fallback_actor_ema if policy.predict_actor == "ema" else policy.fallback_actor,
+                        DiffusionActor,
+                        ("sample", "predict_noise"),
+                    ),
+                    (policy.critic, EnsembleCritic, ("forward", "inputs", "q_values")),
+                ]
+                if policy.fallback_actor is not None
                 else []
             ),
         )

@@ -752,6 +752,7 @@ class POLA(OfflineAlgorithm):
         # bc_learning_rate moves at its rate
         self._bc_loss_fn = CompiledLoss(self._bc_loss, self.compile_update, self._cudagraphs)
         self._q_term_fn = CompiledLoss(self._q_term, self.compile_update, self._cudagraphs)
+        self._fallback_loss_fn = CompiledLoss(self._fallback_loss, self.compile_update, self._cudagraphs)
         if self.bc_lr_schedule is not None:
             check_term_rate_optimizer(self.actor.optimizer)
 
@@ -788,6 +789,7 @@ class POLA(OfflineAlgorithm):
             "_n_imitation_rows",
             "_bc_loss_fn",
             "_q_term_fn",
+            "_fallback_loss_fn",
             "_bc_lr",
             "eta_schedule",
             "critic_lr_schedule",
@@ -795,7 +797,8 @@ class POLA(OfflineAlgorithm):
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
-        return ["policy", "actor.optimizer", "critic.optimizer"], []
+        fallback = ["policy.fallback_actor.optimizer"] if self.policy.fallback_actor is not None else []
+        return ["policy", "actor.optimizer", "critic.optimizer", *fallback], []
 
     def _prepare_offline_data(self, data: OfflineDataset) -> OfflineDataset:
         space = data.dict_observation_space
@@ -941,10 +944,14 @@ class POLA(OfflineAlgorithm):
     # ------------------------------------------------------------------ one gradient step
     def train(self, gradient_steps: int, batch_size: int = 256) -> None:
         self.policy.set_training_mode(True)
+        # the imitation-only fallback actor (fallback_confidence) learns at the actor's rate
+        actor_optimizers = [self.actor.optimizer]
+        if self.policy.fallback_actor is not None:
+            actor_optimizers.append(self.policy.fallback_actor.optimizer)
         if self.critic_lr_schedule is None:
-            self._update_learning_rate([self.actor.optimizer, self.critic.optimizer])
+            self._update_learning_rate([*actor_optimizers, self.critic.optimizer])
         else:
-            self._update_learning_rate(self.actor.optimizer)
+            self._update_learning_rate(actor_optimizers)
             critic_lr = self.critic_lr_schedule(self._current_progress_remaining)
             self.logger.record("train/critic_learning_rate", critic_lr)
             update_learning_rate(self.critic.optimizer, critic_lr)
@@ -991,6 +998,17 @@ class POLA(OfflineAlgorithm):
         critic_grad_norm = self._clip(self.critic.parameters())
         self.critic.optimizer.step()
 
+        # fallback_confidence's actor: L_d of eq. 6 alone, unweighted; before the actor's step, so its random draws
+        # are the same whatever the Q term does
+        fallback_actor = self.policy.fallback_actor
+        if fallback_actor is not None:
+            fallback_actor.optimizer.zero_grad(set_to_none=True)
+            fallback_loss, fallback_stats = self._fallback_loss_fn(actor_obs, actor_actions)
+            fallback_loss.backward()
+            self._clip(fallback_actor.parameters())
+            fallback_actor.optimizer.step()
+            critic_stats.update(fallback_stats)
+
         # actor: L_d + eta L_q (eq. 6, eq. 4), the critic fixed
         self._eta_value.fill_(float(self.eta_schedule(self._current_progress_remaining)))
         span = (self.data_value or 0.0) - self.data_value_floor  # the data's values from the lowest to the mean
@@ -1036,6 +1054,9 @@ class POLA(OfflineAlgorithm):
         if step % self.ema_update_freq == 0:
             decay = self.ema_decay if step >= self.ema_start else 0.0
             _lerp_params(self.actor.parameters(), self.policy.actor_ema.parameters(), 1.0 - decay)
+            if fallback_actor is not None:
+                assert self.policy.fallback_actor_ema is not None
+                _lerp_params(fallback_actor.parameters(), self.policy.fallback_actor_ema.parameters(), 1.0 - decay)
         _lerp_params(self.critic.parameters(), self.critic_target.parameters(), self.tau)
         if step % GRADIENT_RATIO_FREQ == 0 and not self._behaviour_cloning:
             self.logger.record_mean("train/q_bc_grad_ratio", self.q_bc_gradient_ratio(actor_obs, actor_actions))
@@ -1178,6 +1199,12 @@ class POLA(OfflineAlgorithm):
         # the weights' effective sample size as a fraction of the batch: 1 is plain imitation
         ess = weights.sum().pow(2) / (weights.shape[0] * weights.pow(2).sum())
         return bc_loss, {"bc_loss": bc_loss.detach(), "imitation_ess": ess, "imitation_weight_max": weights.max()}
+
+    def _fallback_loss(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """The fallback actor's ``L_d`` (``fallback_confidence``): plain imitation of the data's actions."""
+        assert self.policy.fallback_actor is not None
+        loss = self.policy.fallback_actor.loss(actions, self.policy.actor_features(obs))
+        return loss, {"fallback_bc_loss": loss.detach()}
 
     def _q_term(self, obs: th.Tensor, eta: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
         """``eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor)."""

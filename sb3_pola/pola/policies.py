@@ -74,6 +74,14 @@ class POLAPolicy(BasePolicy):
         halfcheetah/medium-replay's modes and stood still; 0.1 and 0.2 did not)
     :param predict_actor: the actor ``predict`` samples from: ``"ema"`` (Diffusion-QL's evaluation) or
         ``"online"`` (the trained actor itself; the EMA lags it by about ``1 / (1 - ema_decay)`` updates)
+    :param fallback_confidence: ``k`` of the confident choice; ``None`` (default) builds none. A second, imitation-only
+        diffusion actor (``fallback_actor``, with its own EMA copy) is trained beside POLA's on ``L_d`` alone, and
+        ``predict`` runs both and takes POLA's action only where the critic's members agree it is better than the
+        imitation actor's: ``mean_j d_j > k std_j d_j``, ``d_j = Q_j(s, a) - Q_j(s, a_bc)`` over the ensemble; the
+        imitation actor's elsewhere. ``k = 0`` is the ensemble mean's choice of the two; a larger ``k`` falls back
+        more often. Where the critic's gain at its own actions is within its members' spread (the narrow hopper file)
+        the Q term's move is noise to the critic itself (docs/results.md, #23's thirty-fifth and thirty-sixth
+        passes). Not with ``n_action_samples > 1``
     :param dynamics_kwargs: arguments of :class:`~sb3_pola.common.dynamics.EnsembleDynamics`; ``None`` builds no model
     :param compile_activations: run Mish through a kernel fused by ``torch.compile``
         (:mod:`sb3_pola.common.activations`; same function, float rounding aside, eager fallback)
@@ -83,6 +91,8 @@ class POLAPolicy(BasePolicy):
 
     actor: DiffusionActor
     actor_ema: DiffusionActor
+    fallback_actor: DiffusionActor | None
+    fallback_actor_ema: DiffusionActor | None
     dynamics_fitted: th.Tensor
     critic: EnsembleCritic
     critic_target: EnsembleCritic
@@ -109,6 +119,7 @@ class POLAPolicy(BasePolicy):
         deterministic_rule: str = "mode",
         mode_samples: int = 16,
         mode_bandwidth: float = 0.2,
+        fallback_confidence: float | None = None,
         dynamics_kwargs: dict[str, Any] | None = None,
         compile_activations: bool = False,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
@@ -146,6 +157,12 @@ class POLAPolicy(BasePolicy):
             raise ValueError(f"mode_samples must be >= 1 and mode_bandwidth > 0, got {mode_samples}, {mode_bandwidth}")
         self.mode_samples = mode_samples
         self.mode_bandwidth = mode_bandwidth
+        if fallback_confidence is not None:
+            if not np.isfinite(fallback_confidence):
+                raise ValueError(f"fallback_confidence must be a finite number or None, got {fallback_confidence}")
+            if n_action_samples > 1:
+                raise ValueError("fallback_confidence chooses between two actions; it needs n_action_samples=1")
+        self.fallback_confidence = fallback_confidence
         self.net_arch = net_arch
         self.activation_fn = activation_fn
         if actor_activation_fn is None:
@@ -168,16 +185,20 @@ class POLAPolicy(BasePolicy):
         obs_dim = int(np.prod(observation_space.shape))
 
         self.features_extractor = self.make_features_extractor()  # actor's s_new
-        self.actor = DiffusionActor(
-            self.features_extractor.features_dim,
-            action_dim,
-            actor_arch,
-            n_diffusion_steps=n_diffusion_steps,
-            beta_schedule=beta_schedule,
-            time_embedding_dim=time_embedding_dim,
-            activation_fn=fused_activation(actor_activation_fn) if compile_activations else actor_activation_fn,
-            prediction_type=prediction_type,
-        )
+
+        def make_actor() -> DiffusionActor:
+            return DiffusionActor(
+                self.features_extractor.features_dim,
+                action_dim,
+                actor_arch,
+                n_diffusion_steps=n_diffusion_steps,
+                beta_schedule=beta_schedule,
+                time_embedding_dim=time_embedding_dim,
+                activation_fn=fused_activation(actor_activation_fn) if compile_activations else actor_activation_fn,
+                prediction_type=prediction_type,
+            )
+
+        self.actor = make_actor()
         self.actor_ema = copy.deepcopy(self.actor).requires_grad_(False)
         critic_features = StateProductsExtractor(observation_space, use_state_products=critic_state_products)
         # the critic's similarity term differentiates it twice: Mish in a form whose second derivative is finite
@@ -192,9 +213,19 @@ class POLAPolicy(BasePolicy):
             self.dynamics = EnsembleDynamics(obs_dim, action_dim, **dynamics_kwargs)
         # whether the dynamics model has been fitted; a buffer so it travels with the weights
         self.register_buffer("dynamics_fitted", th.zeros((), dtype=th.bool))
+        # built last, so that the other modules' initial weights do not depend on the option
+        self.fallback_actor = None
+        self.fallback_actor_ema = None
+        if fallback_confidence is not None:
+            self.fallback_actor = make_actor()
+            self.fallback_actor_ema = copy.deepcopy(self.fallback_actor).requires_grad_(False).train(False)
 
         self.actor.optimizer = self.optimizer_class(self.actor.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
         self.critic.optimizer = self.optimizer_class(self.critic.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+        if self.fallback_actor is not None:
+            self.fallback_actor.optimizer = self.optimizer_class(  # type: ignore[call-arg]
+                self.fallback_actor.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs
+            )
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
@@ -216,6 +247,7 @@ class POLAPolicy(BasePolicy):
             deterministic_rule=self.deterministic_rule,
             mode_samples=self.mode_samples,
             mode_bandwidth=self.mode_bandwidth,
+            fallback_confidence=self.fallback_confidence,
             dynamics_kwargs=self.dynamics_kwargs,
             compile_activations=self.compile_activations,
             lr_schedule=self._dummy_schedule,
@@ -240,8 +272,27 @@ class POLAPolicy(BasePolicy):
     def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
         assert isinstance(observation, th.Tensor)
         obs = observation.float()
+        action = self._actor_action(self.actor_ema if self.predict_actor == "ema" else self.actor, obs, deterministic)
+        if self.fallback_actor is None:
+            return action
+        assert self.fallback_actor_ema is not None and self.fallback_confidence is not None
+        fallback_actor = self.fallback_actor_ema if self.predict_actor == "ema" else self.fallback_actor
+        fallback = self._actor_action(fallback_actor, obs, deterministic)
+        return self.confident_choice(obs, action, fallback, self.fallback_confidence)
+
+    def confident_choice(self, obs: th.Tensor, action: th.Tensor, fallback: th.Tensor, k: float) -> th.Tensor:
+        """``fallback_confidence``'s rule: ``action`` ``[B, A]`` where the critic's members agree it beats
+        ``fallback`` (``mean_j d_j > k std_j d_j``, ``d_j = Q_j(s, action) - Q_j(s, fallback)``), else ``fallback``."""
+        batch_size = obs.shape[0]
+        with th.no_grad():
+            q = self.critic(th.cat([obs, obs]), th.cat([action, fallback]))  # [N, 2B]
+        gain = q[:, :batch_size] - q[:, batch_size:]  # [N, B]
+        take = gain.mean(dim=0) > k * gain.std(dim=0)  # [B]
+        return th.where(take.unsqueeze(1), action, fallback)
+
+    def _actor_action(self, actor: DiffusionActor, obs: th.Tensor, deterministic: bool) -> th.Tensor:
+        """One actor's action by the policy's rule (``deterministic_rule``, or the best of ``n_action_samples``)."""
         n = self.n_action_samples
-        actor = self.actor_ema if self.predict_actor == "ema" else self.actor
         # the fast form of actor.sample (same function, float rounding aside): predict needs no gradient
         if n == 1:
             if deterministic and self.deterministic_rule == "mode":
@@ -305,8 +356,8 @@ class POLAPolicy(BasePolicy):
     def set_training_mode(self, mode: bool) -> None:
         # targets and the EMA copy stay in eval mode; they have no dropout/batch-norm, so this is for clarity only.
         # predict() calls this every time: walking every submodule would cost a large part of a single predict
-        for module in (self.actor, self.critic):
-            if module.training != mode:
+        for module in (self.actor, self.critic, self.fallback_actor):
+            if module is not None and module.training != mode:
                 module.train(mode)
         self.training = mode
 
