@@ -206,6 +206,33 @@ def test_ranked_candidates_export_with_the_critics_and_match_predict(tiny_datase
             np.testing.assert_allclose(single, expected[:1], rtol=0, atol=ATOL)
 
 
+def test_confident_choice_exports_both_actors_and_the_critics(tiny_dataset, tmp_path: pathlib.Path):
+    """``fallback_confidence``: the graph runs POLA's and the fallback actor's chains and the critics' choice between
+    them, and matches predict where it takes either action, in both formats."""
+    observations = np.random.default_rng(0).normal(0.0, 2.0, (32, 3)).astype(np.float32)
+    policy_kwargs = {"net_arch": [32, 32], "fallback_confidence": 0.0}
+    model = POLA("MlpPolicy", dataset=tiny_dataset, seed=0, device="cpu", policy_kwargs=policy_kwargs)
+    _perturb(model, seed=4)
+    model.policy.actor_ema.load_state_dict(model.actor.state_dict())
+    with th.no_grad():  # critics whose members prefer either actor's action at different states
+        for param in model.policy.critic.parameters():
+            param.add_(0.5 * th.randn(param.shape, generator=th.Generator().manual_seed(5)))
+    expected, _ = model.predict(observations, deterministic=True)
+    model.policy.fallback_confidence = -1e9
+    own, _ = model.predict(observations, deterministic=True)
+    model.policy.fallback_confidence = 0.0
+    took_own = np.all(expected == own, axis=1)
+    assert took_own.any() and not took_own.all()
+    graph = DeterministicPolicyGraph(model.policy)
+    assert graph.fallback is not None and graph.choice_critic is not None
+    scripted = th.jit.load(str(model.export_policy(tmp_path / "choice.pt", format="torchscript")))
+    with th.no_grad():
+        np.testing.assert_allclose(scripted(th.as_tensor(observations)).numpy(), expected, rtol=0, atol=ATOL)
+    if importlib.util.find_spec("onnxruntime") is not None:
+        path = model.export_policy(tmp_path / "choice.onnx")
+        np.testing.assert_allclose(_session(path).run(None, {"obs": observations})[0], expected, rtol=0, atol=ATOL)
+
+
 def test_refuses_unknown_formats_and_overridden_predict(tiny_dataset, tmp_path: pathlib.Path):
     model = POLA("MlpPolicy", dataset=tiny_dataset, device="cpu", policy_kwargs={"net_arch": [16]})
     with pytest.raises(ValueError, match="format must be one of"):

@@ -435,6 +435,7 @@ def test_compiled_mish_equals_mish():
         pytest.param(False, 0.0, 0.0, "actor", None, (0.0, "value"), id="trust-value"),
         pytest.param(False, 0.0, 0.0, "actor", None, (0.0, "bellman"), id="trust-bellman"),
         pytest.param(False, 0.0, 0.0, "actor", None, "critic-bc", id="critic-bc"),
+        pytest.param(False, 0.0, 0.0, "actor", None, "fallback", id="fallback"),
     ],
 )
 def test_compiled_update_matches_eager(
@@ -456,7 +457,8 @@ def test_compiled_update_matches_eager(
     gradient through the model; with ``bc_weight_temp`` the imitation term's advantage weights (the EMA actor's chain
     and a critic call inside the BC graph); with ``lookahead_trust`` (margin, rule) the look-ahead's mask from the
     critic's own values (and, by the Bellman rule, the model's rewards); ``"critic-bc"`` in its place: ReBRAC's
-    critic penalty, the data's next actions in the critic's graph.
+    critic penalty, the data's next actions in the critic's graph; ``"fallback"``: ``fallback_confidence``'s
+    imitation-only actor, its own loss graph and step.
     """
     from torch._dynamo.utils import counters
 
@@ -481,6 +483,8 @@ def test_compiled_update_matches_eager(
     )
     if lookahead_trust == "critic-bc":
         kwargs["critic_bc_coef"] = 0.5
+    elif lookahead_trust == "fallback":
+        kwargs["policy_kwargs"] = {"net_arch": [16], "fallback_confidence": 1.0}
     elif lookahead_trust:
         kwargs.update(lookahead_trust_margin=lookahead_trust[0], lookahead_trust_rule=lookahead_trust[1])
     # dynamo's counters are global and its cache outlives a test: both reset, so the first step's graphs are this test's
@@ -512,6 +516,8 @@ def test_compiled_update_matches_eager(
     assert compiled._bc_loss_fn.compiled_ok and compiled._q_term_fn.compiled_ok
     assert compiled._critic_loss_fn.compiled_ok  # with the similarity term too, in its written-out form
     assert eager._critic_loss_fn.compiled is None and eager._bc_loss_fn.compiled is None
+    if compiled.policy.fallback_actor is not None:
+        assert compiled._fallback_loss_fn.compiled_ok
 
 
 def test_compile_update_falls_back_to_eager(monkeypatch):

@@ -8,8 +8,8 @@ and their kernel mode (``deterministic_rule="mode"``, the default), once (``"obs
 action space's bounds. With ``n_action_samples > 1`` (the Q-ranked rule) the graph also holds the target critics:
 it runs the chain for the ``n`` candidates of ``predict`` (their fixed noise held as a buffer) and keeps the one
 with the highest minimum over the ensemble. With ``fallback_confidence`` (the confident choice) it holds the
-imitation actor's chain too, and the critics that choose between the two actions. Input ``obs`` ``[batch, obs_dim]`` (float32), output
-``action`` ``[batch, action_dim]``, with a dynamic batch dimension.
+imitation actor's chain too, and the critics that choose between the two actions. Input ``obs`` ``[batch,
+obs_dim]`` (float32), output ``action`` ``[batch, action_dim]``, with a dynamic batch dimension.
 
 ``sb3-pola export MODEL.zip OUT [--format onnx|torchscript]``.
 """

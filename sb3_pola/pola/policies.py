@@ -28,6 +28,30 @@ from sb3_pola.pola.critic import EnsembleCritic
 from sb3_pola.pola.fast_sampling import kernel_mode_fast, sample_no_grad
 
 
+def _check_predict_arguments(
+    n_action_samples: int,
+    predict_actor: str,
+    deterministic_rule: str,
+    mode_samples: int,
+    mode_bandwidth: float,
+    fallback_confidence: float | None,
+) -> None:
+    """Raise ``ValueError`` for :class:`POLAPolicy`'s ``predict`` arguments out of their range."""
+    if n_action_samples < 1:
+        raise ValueError(f"n_action_samples must be >= 1, got {n_action_samples}")
+    if predict_actor not in ("ema", "online"):
+        raise ValueError(f"predict_actor must be 'ema' or 'online', got {predict_actor!r}")
+    if deterministic_rule not in DETERMINISTIC_RULES:
+        raise ValueError(f"deterministic_rule must be one of {DETERMINISTIC_RULES}, got {deterministic_rule!r}")
+    if mode_samples < 1 or mode_bandwidth <= 0:
+        raise ValueError(f"mode_samples must be >= 1 and mode_bandwidth > 0, got {mode_samples}, {mode_bandwidth}")
+    if fallback_confidence is not None:
+        if not np.isfinite(fallback_confidence):
+            raise ValueError(f"fallback_confidence must be a finite number or None, got {fallback_confidence}")
+        if n_action_samples > 1:
+            raise ValueError("fallback_confidence chooses between two actions; it needs n_action_samples=1")
+
+
 class POLAPolicy(BasePolicy):
     """Policy of POLA: diffusion actor on ``s_new`` (state + products), its EMA copy, critic ensemble and targets.
 
@@ -145,23 +169,13 @@ class POLAPolicy(BasePolicy):
             actor_arch, critic_arch = net_arch["pi"], net_arch["qf"]
         else:
             actor_arch, critic_arch = net_arch, net_arch
-        if n_action_samples < 1:
-            raise ValueError(f"n_action_samples must be >= 1, got {n_action_samples}")
-        if predict_actor not in ("ema", "online"):
-            raise ValueError(f"predict_actor must be 'ema' or 'online', got {predict_actor!r}")
+        _check_predict_arguments(
+            n_action_samples, predict_actor, deterministic_rule, mode_samples, mode_bandwidth, fallback_confidence
+        )
         self.predict_actor = predict_actor
-        if deterministic_rule not in DETERMINISTIC_RULES:
-            raise ValueError(f"deterministic_rule must be one of {DETERMINISTIC_RULES}, got {deterministic_rule!r}")
         self.deterministic_rule = deterministic_rule
-        if mode_samples < 1 or mode_bandwidth <= 0:
-            raise ValueError(f"mode_samples must be >= 1 and mode_bandwidth > 0, got {mode_samples}, {mode_bandwidth}")
         self.mode_samples = mode_samples
         self.mode_bandwidth = mode_bandwidth
-        if fallback_confidence is not None:
-            if not np.isfinite(fallback_confidence):
-                raise ValueError(f"fallback_confidence must be a finite number or None, got {fallback_confidence}")
-            if n_action_samples > 1:
-                raise ValueError("fallback_confidence chooses between two actions; it needs n_action_samples=1")
         self.fallback_confidence = fallback_confidence
         self.net_arch = net_arch
         self.activation_fn = activation_fn
