@@ -47,3 +47,24 @@ def test_choice_follows_the_members_test_of_the_gain(pendulum_path):
         choice.predict(obs)
     taken = [r > k for r in ratios]
     assert choice.took_pola == taken and 0 < sum(taken) < len(taken)
+
+
+def test_model_choice_runs_the_packages_rule_at_each_k(pendulum_path):
+    """``--model``: one model with the package's fallback actor, evaluated at another ``k`` (its own actor alone, its
+    imitation actor alone, the rule between), the steps on its own action counted."""
+    module = _script()
+    kwargs = light_kwargs(rollout_length=0, n_critics=4, policy_kwargs={"net_arch": [32, 32], "fallback_confidence": 2.0})
+    model = POLA("MlpPolicy", dataset=pendulum_path, **kwargs)
+    model.learn(30)
+    observations = model.replay_buffer.observations[:40].numpy()
+    policy = model.policy
+    with th.no_grad():
+        own = policy.unscale_action(policy._actor_action(policy.actor_ema, th.as_tensor(observations), True).numpy())
+    shares = {}
+    for k in (module.EXTREMES["pola"], module.EXTREMES["bc"], 0.0):
+        choice = module.ModelChoice(model, k)
+        actions = np.concatenate([choice.predict(obs[None])[0] for obs in observations])
+        shares[k] = float(np.mean(choice.took_pola))
+        np.testing.assert_array_equal(np.all(actions == own, axis=1), choice.took_pola)
+        assert model.policy.fallback_confidence == k
+    assert shares[module.EXTREMES["pola"]] == 1.0 and shares[module.EXTREMES["bc"]] == 0.0
