@@ -44,6 +44,13 @@ def configurations(quick: bool, compiled: bool = False) -> list[dict[str, Any]]:
     configs: list[dict[str, Any]] = [
         {"name": "paper hopper", "task": "hopper", "kwargs": {}, "flops": True},
         {"name": "defaults hopper", "task": "hopper", "kwargs": DEFAULTS_FORM},
+        # fallback_confidence's second, imitation-only actor: one more L_d step a gradient step
+        {
+            "name": "defaults hopper, fallback actor",
+            "task": "hopper",
+            "kwargs": DEFAULTS_FORM,
+            "policy_kwargs": {"fallback_confidence": 1.0},
+        },
         {"name": "paper halfcheetah", "task": "halfcheetah", "kwargs": {}, "flops": not quick},
         {"name": "T=0", "task": "hopper", "kwargs": {"rollout_length": 0}},
         {"name": "T=1", "task": "hopper", "kwargs": {"rollout_length": 1}},
