@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import pathlib
 
 import numpy as np
@@ -68,3 +69,31 @@ def test_model_choice_runs_the_packages_rule_at_each_k(pendulum_path):
         np.testing.assert_array_equal(np.all(actions == own, axis=1), choice.took_pola)
         assert model.policy.fallback_confidence == k
     assert shares[module.EXTREMES["pola"]] == 1.0 and shares[module.EXTREMES["bc"]] == 0.0
+
+
+def test_choice_table_pairs_each_k_with_either_actor(tmp_path: pathlib.Path):
+    spec = importlib.util.spec_from_file_location("choice_table", SCRIPT.parent / "choice_table.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    rows = [
+        {
+            "dataset": "d",
+            "seed": s,
+            "pola": p,
+            "bc": b,
+            "k1": k,
+            "pola_pola_share": 1.0,
+            "bc_pola_share": 0.0,
+            "k1_pola_share": 0.5,
+        }
+        for s, p, b, k in ((0, 30.0, 40.0, 36.0), (1, 32.0, 44.0, 40.0), (2, 31.0, 42.0, 38.0))
+    ]
+    rows.append({"dataset": "d", "seed": 0, "k1": 0.0})  # an offline row of two models: not this table's
+    path = tmp_path / "rows.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    cells = module.read(path, None)
+    assert list(cells) == ["d"] and sorted(cells["d"]) == [0, 1, 2]
+    line = next(line for line in module.table(cells).splitlines() if "| k1 |" in line)
+    # k1 - pola: 6, 8, 7 -> 7.0 ± 0.6; k1 - bc: -4, -4, -4 -> -4.0 ± 0.0
+    assert "| 38.0 ± 2.0 | +7.0 ± 0.6 | -4.0 ± 0.0 | 0.50 |" in line
