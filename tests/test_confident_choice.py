@@ -69,6 +69,13 @@ def test_model_choice_runs_the_packages_rule_at_each_k(pendulum_path):
         np.testing.assert_array_equal(np.all(actions == own, axis=1), choice.took_pola)
         assert model.policy.fallback_confidence == k
     assert shares[module.EXTREMES["pola"]] == 1.0 and shares[module.EXTREMES["bc"]] == 0.0
+    # the data share: the same rule on data states, in one batch
+    assert module.data_share(model, observations, module.EXTREMES["pola"]) == 1.0
+    assert module.data_share(model, observations, module.EXTREMES["bc"]) == 0.0
+    choice = module.ModelChoice(model, 0.5)
+    for obs in observations:
+        choice.predict(obs[None])
+    assert module.data_share(model, observations, 0.5) == np.mean(choice.took_pola)
 
 
 def test_choice_table_pairs_each_k_with_either_actor(tmp_path: pathlib.Path):

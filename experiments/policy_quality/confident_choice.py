@@ -17,7 +17,9 @@ mazes' success rate), printed and appended to ``--out``.
 ``--model`` evaluates one model trained with the package's option (``policy_kwargs={"fallback_confidence": k}``:
 both actors in one model, the rule inside ``predict``) at each ``--k``; ``pola`` and ``bc`` are its own actor alone
 and its imitation actor alone (the rule at a ``k`` no gain reaches either way), so one model gives the paired
-comparison.
+comparison. With ``--model`` the row also holds, at each numeric ``k``, the share of ``--data-states`` states drawn
+from the data (seed 0) on which the rule takes the model's own action (``k<k>_data_share``): what the critic says of
+the two actors before any evaluation.
 """
 
 from __future__ import annotations
@@ -79,6 +81,20 @@ class ModelChoice:
 EXTREMES = {"pola": -1e9, "bc": 1e9}
 
 
+def data_share(model: POLA, observations: np.ndarray, k: float) -> float:
+    """The share of ``observations`` ``[n, obs]`` on which the model's confident choice at ``k`` takes its own
+    action (both actors under the policy's deterministic rule)."""
+    policy = model.policy
+    assert policy.fallback_actor_ema is not None
+    obs = th.as_tensor(observations, dtype=th.float32)
+    policy.set_training_mode(False)
+    with th.no_grad():
+        own = policy._actor_action(policy.actor_ema, obs, deterministic=True)
+        fallback = policy._actor_action(policy.fallback_actor_ema, obs, deterministic=True)
+        chosen = type(policy).confident_choice(policy, obs, own, fallback, k)
+    return float((chosen == own).all(dim=1).float().mean())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--dataset", required=True)
@@ -88,6 +104,7 @@ def main() -> None:
     parser.add_argument("--model", help="instead of --pola and --bc: a model with the package's fallback actor")
     parser.add_argument("--k", nargs="+", default=["0", "1", "2"], help="numbers; with --model also pola, bc")
     parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--data-states", type=int, default=2000, help="with --model: data states for the data share")
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
     th.set_num_threads(1)
@@ -101,6 +118,10 @@ def main() -> None:
         if model.policy.fallback_actor is None:
             parser.error(f"{args.model} has no fallback actor (policy_kwargs fallback_confidence)")
         row["model"] = args.model
+        rows = np.random.default_rng(0).choice(len(data.observations), args.data_states, replace=False)
+        for k in args.k:
+            if k not in EXTREMES:
+                row[f"k{float(k):g}_data_share"] = round(data_share(model, data.observations[rows], float(k)), 3)
     else:
         pola, bc = POLA.load(args.pola, device="cpu"), POLA.load(args.bc, device="cpu")
     for k in args.k:
