@@ -92,7 +92,7 @@ def data_share(model: POLA, observations: np.ndarray, k: float) -> float:
         own = policy._actor_action(policy.actor_ema, obs, deterministic=True)
         fallback = policy._actor_action(policy.fallback_actor_ema, obs, deterministic=True)
         chosen = type(policy).confident_choice(policy, obs, own, fallback, k)
-    return float((chosen == own).all(dim=1).float().mean())
+    return float(np.mean((chosen == own).all(dim=1).numpy()))
 
 
 def main() -> None:
