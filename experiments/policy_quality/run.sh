@@ -1012,3 +1012,27 @@ for s in 3 4 5 6 7; do
       --pola "$OUT/${d//\//_}/RNW/seed$s.zip" --bc "$OUT/${d//\//_}/BCRNW/seed$s.zip" --out "$OUT/confident_choice.jsonl"
   done
 done
+# --- thirty-sixth pass (stop 63): the confident choice as the package's option (policy_kwargs fallback_confidence):
+# the defaults (RNW) with the fallback actor at k = 1 (FB1), seeds 0-2 on the six datasets and 3-7 on hopper/medium
+# (screen rows, collection amd-fallback), then each model at k = -inf, +inf, 0, 1, 2 (its own actor alone, its
+# imitation actor alone, the choice; rows in confident_choice.jsonl, collection amd-fallback); table:
+# python experiments/policy_quality/choice_table.py --collection amd-fallback. Costs: train_bench's "defaults hopper,
+# fallback actor" beside "defaults hopper" and "paper hopper"; bench_fallback_predict.py.
+FB1='"compile_update": true, "use_state_products": false, "policy_kwargs": {"actor_activation_fn": "ReLU", "net_arch": {"pi": [256, 256], "qf": [128, 128]}, "fallback_confidence": 1.0}'
+for s in 0 1 2; do
+  for d in pointmaze/umaze-v0 pointmaze/medium-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 hopper/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules mode --name FB1 --kwargs "{$FB1}"
+  done
+done
+for s in 3 4 5 6 7; do
+  screen --dataset hopper/medium-v0 --seed "$s" --rules mode --name FB1 --kwargs "{$FB1}"
+done
+for d in pointmaze/umaze-v0 pointmaze/medium-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 hopper/medium-replay-v0; do
+  for s in 0 1 2 3 4 5 6 7; do
+    [ -f "$OUT/${d//\//_}/FB1/seed$s.zip" ] || continue
+    "$PY" experiments/policy_quality/confident_choice.py --dataset "$d" --seed "$s" --k pola bc 0 1 2 \
+      --model "$OUT/${d//\//_}/FB1/seed$s.zip" --out "$OUT/confident_choice.jsonl"
+  done
+done
+"$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" "defaults hopper, fallback actor" > "$OUT/bench_fallback_train.json"
+"$PY" experiments/policy_quality/bench_fallback_predict.py > "$OUT/bench_fallback_predict.json"
