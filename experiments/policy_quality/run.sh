@@ -1013,7 +1013,7 @@ for s in 3 4 5 6 7; do
   done
 done
 # --- thirty-sixth pass (stop 63): the confident choice as the package's option (policy_kwargs fallback_confidence):
-# the defaults (RNW) with the fallback actor at k = 1 (FB1), seeds 0-2 on the six datasets and 3-7 on hopper/medium
+# the defaults (RNW) with the fallback actor at k = 1 (FB1), seeds 0-2 on the six datasets and 3-7 on the hopper files
 # (screen rows, collection amd-fallback), then each model at k = -inf, +inf, 0, 1, 2 (its own actor alone, its
 # imitation actor alone, the choice; rows in confident_choice.jsonl, collection amd-fallback); table:
 # python experiments/policy_quality/choice_table.py --collection amd-fallback. Costs: train_bench's "defaults hopper,
@@ -1025,7 +1025,9 @@ for s in 0 1 2; do
   done
 done
 for s in 3 4 5 6 7; do
-  screen --dataset hopper/medium-v0 --seed "$s" --rules mode --name FB1 --kwargs "{$FB1}"
+  for d in hopper/medium-v0 hopper/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules mode --name FB1 --kwargs "{$FB1}"
+  done
 done
 for d in pointmaze/umaze-v0 pointmaze/medium-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0 hopper/medium-v0 hopper/medium-replay-v0; do
   for s in 0 1 2 3 4 5 6 7; do
