@@ -34,6 +34,7 @@ import torch as th
 from sb3_pola import POLA
 from sb3_pola.common.datasets import load_offline_dataset, make_env
 from sb3_pola.common.evaluation import evaluate
+from sb3_pola.pola.policies import choose_confident
 
 
 class ConfidentChoice:
@@ -47,11 +48,10 @@ class ConfidentChoice:
         a_pola, _ = self.pola.predict(obs, deterministic=True)
         a_bc, _ = self.bc.predict(obs, deterministic=True)
         state, _ = self.pola.policy.obs_to_tensor(obs)  # [1, obs_dim]
-        actions = th.as_tensor(np.stack([a_pola, a_bc]), dtype=th.float32).reshape(2, -1)  # [2, act_dim]
+        actions = th.as_tensor(np.stack([a_pola, a_bc]), dtype=th.float32).reshape(2, 1, -1)  # [2, 1, act_dim]
         with th.no_grad():
-            q = self.pola.policy.critic(state.expand(2, -1), actions)  # [N, 2]
-        gain = q[:, 0] - q[:, 1]  # [N]
-        take = bool(gain.mean() > self.k * gain.std())
+            q = self.pola.policy.critic(state.expand(2, -1), actions.flatten(0, 1))  # [N, 2]
+        take = bool(th.equal(choose_confident(q, actions[0], actions[1], self.k), actions[0]))
         self.took_pola.append(take)
         return (a_pola if take else a_bc), None
 

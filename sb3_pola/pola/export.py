@@ -35,7 +35,7 @@ from sb3_pola.common.torch_layers import StateProductsExtractor
 from sb3_pola.pola.actor import DiffusionActor, kernel_mode, noise_from_projection, observation_noise_projection
 from sb3_pola.pola.critic import EnsembleCritic
 from sb3_pola.pola.fast_sampling import InferencePlan, inference_plan, run_plan
-from sb3_pola.pola.policies import POLAPolicy
+from sb3_pola.pola.policies import POLAPolicy, choose_confident
 
 EXPORT_FORMATS = ("onnx", "torchscript")
 INPUT_NAME = "obs"
@@ -187,12 +187,8 @@ class DeterministicPolicyGraph(nn.Module):
     def _confident_choice(self, obs: th.Tensor, action: th.Tensor, fallback: th.Tensor) -> th.Tensor:
         """``predict``'s confident choice (:meth:`~sb3_pola.pola.policies.POLAPolicy.confident_choice`)."""
         assert self.choice_critic is not None and self.fallback_confidence is not None
-        b = obs.shape[0]
         q = self.choice_critic(th.cat([obs, obs]), th.cat([action, fallback]))  # [N, 2B]
-        q = q.view(q.shape[0], 2, b)  # [N, 2, B]: the action's, then the fallback's
-        gain = q[:, 0] - q[:, 1]  # [N, B]
-        take = gain.mean(dim=0) > self.fallback_confidence * gain.std(dim=0)  # [B]
-        return th.where(take.unsqueeze(1), action, fallback)
+        return choose_confident(q, action, fallback, self.fallback_confidence)
 
     def _mode(self, obs: th.Tensor, x: th.Tensor) -> th.Tensor:
         """``predict``'s mode rule: ``k`` chains per state with the observation's own noise, their kernel mode."""

@@ -52,6 +52,16 @@ def _check_predict_arguments(
             raise ValueError("fallback_confidence chooses between two actions; it needs n_action_samples=1")
 
 
+def choose_confident(q: th.Tensor, action: th.Tensor, fallback: th.Tensor, k: float) -> th.Tensor:
+    """``fallback_confidence``'s rule: ``action`` ``[B, A]`` where the critic's members agree it beats ``fallback``
+    (``mean_j d_j > k std_j d_j``, ``d_j = Q_j(s, action) - Q_j(s, fallback)``), else ``fallback``. ``q`` ``[N, 2B]``:
+    the members' values at the ``B`` actions, then at the ``B`` fallbacks (``predict`` and the export graph)."""
+    q = q.view(q.shape[0], 2, action.shape[0])  # [N, 2, B]
+    gain = q[:, 0] - q[:, 1]  # [N, B]
+    take = gain.mean(dim=0) > k * gain.std(dim=0)  # [B]
+    return th.where(take.unsqueeze(1), action, fallback)
+
+
 class POLAPolicy(BasePolicy):
     """Policy of POLA: diffusion actor on ``s_new`` (state + products), its EMA copy, critic ensemble and targets.
 
@@ -295,14 +305,10 @@ class POLAPolicy(BasePolicy):
         return self.confident_choice(obs, action, fallback, self.fallback_confidence)
 
     def confident_choice(self, obs: th.Tensor, action: th.Tensor, fallback: th.Tensor, k: float) -> th.Tensor:
-        """``fallback_confidence``'s rule: ``action`` ``[B, A]`` where the critic's members agree it beats
-        ``fallback`` (``mean_j d_j > k std_j d_j``, ``d_j = Q_j(s, action) - Q_j(s, fallback)``), else ``fallback``."""
-        batch_size = obs.shape[0]
+        """:func:`choose_confident` between ``action`` and ``fallback`` ``[B, A]`` by this policy's critics."""
         with th.no_grad():
             q = self.critic(th.cat([obs, obs]), th.cat([action, fallback]))  # [N, 2B]
-        gain = q[:, :batch_size] - q[:, batch_size:]  # [N, B]
-        take = gain.mean(dim=0) > k * gain.std(dim=0)  # [B]
-        return th.where(take.unsqueeze(1), action, fallback)
+        return choose_confident(q, action, fallback, k)
 
     def _actor_action(self, actor: DiffusionActor, obs: th.Tensor, deterministic: bool) -> th.Tensor:
         """One actor's action by the policy's rule (``deterministic_rule``, or the best of ``n_action_samples``)."""
