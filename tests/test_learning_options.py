@@ -444,3 +444,45 @@ def test_critic_second_derivative_is_finite_at_large_activations(compile_activat
         (h,) = th.autograd.grad(g.sum(), x)
     assert th.allclose(y, F.mish(x)) and th.isfinite(h).all()
     assert th.allclose(TwiceDifferentiableMish()(x), F.mish(x))  # outside the block: F.mish itself
+
+
+# ---------------------------------------------------------------- q_term_confidence
+def _q_term_on_fixed_draws(model, obs, actions):
+    """The actor step's Q term with the data's actions, on fixed draws (seed 1)."""
+    th.manual_seed(1)
+    with model._critic_frozen():
+        return model._q_term(obs, model._eta_value, actions)
+
+
+def test_q_term_confidence_counts_a_state_where_the_members_agree_its_action_beats_the_datas(pendulum_path):
+    kwargs = light_kwargs(n_critics=4, q_term_confidence=0.0)
+    del kwargs["seed"], kwargs["device"]
+    model = model_on_dataset(pendulum_path, **kwargs)
+    obs, actions = model.replay_buffer.observations[:64], model.replay_buffer.actions[:64]
+    _, stats = _q_term_on_fixed_draws(model, obs, actions)
+    th.manual_seed(1)  # the actor's action at s_t is the Q term's first draw
+    with th.no_grad():
+        gain = model.critic(obs, model._sample_actor(model.policy.actor_features(obs))) - model.critic(obs, actions)
+    want = (gain.mean(dim=0) > 0).float().mean()  # [N, B] -> the share of states whose members agree
+    assert 0.0 < float(want) < 1.0
+    th.testing.assert_close(stats["q_term_share"], want)
+
+    model.q_term_confidence = 1e9  # no state passes: no Q gradient reaches the actor
+    loss, stats = _q_term_on_fixed_draws(model, obs, actions)
+    assert float(stats["q_term_share"]) == 0.0 and float(loss.detach()) == 0.0
+    model.actor.zero_grad(set_to_none=True)
+    loss.backward()
+    assert all(p.grad is None or not p.grad.any() for p in model.actor.parameters())
+
+    model.q_term_confidence = -1e9  # every state passes: the paper's Q term on the same draws
+    gated, stats = _q_term_on_fixed_draws(model, obs, actions)
+    model.q_term_confidence = None
+    plain, stats_plain = _q_term_on_fixed_draws(model, obs, actions)
+    assert float(stats["q_term_share"]) == 1.0 and "q_term_share" not in stats_plain
+    th.testing.assert_close(gated, plain, rtol=0, atol=0)
+
+
+def test_q_term_confidence_share_is_logged_in_training(pendulum_path):
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(n_critics=3, q_term_confidence=1.0))
+    model.learn(4)
+    assert 0.0 <= model.logger.name_to_value["train/q_term_share"] <= 1.0

@@ -142,6 +142,7 @@ def reference_step(model, policy, batch, next_data=None) -> dict[str, object]:
     bc_loss = (weights * ((actor.predict_noise(x_t, t, features) - target) ** 2).mean(dim=-1)).mean()
     # L_q (eq. 3, 4): gamma^i-weighted top-K pessimistic Q along the model rollout, masked after termination
     state, action = obs, ref_sample(actor, features)
+    first_action = action
     alive = th.ones(obs.shape[0])
     terms, penalties, rewards = [], [], []
     dyn = policy.dynamics
@@ -174,6 +175,14 @@ def reference_step(model, policy, batch, next_data=None) -> dict[str, object]:
         if model.lookahead_trust_rule == "bellman":  # or the value the rollout implies for s_t
             judged = [sum(rewards[:i]) + model.gamma**i * judged[i] for i in range(len(judged))]
         terms = terms[:1] + [(q_k, a * (judged[i] <= bound).float()) for i, (q_k, a) in enumerate(terms) if i > 0]
+    if model.q_term_confidence is not None:  # a state's terms count where the members agree a_t beats the data's
+        with th.no_grad():
+            gain = ref_q(critic, obs, first_action) - ref_q(critic, obs, actions)  # [N, B]
+            mean = gain.mean(dim=0)
+            std = ((gain - mean).pow(2).sum(dim=0) / (gain.shape[0] - 1)).sqrt()
+            confident = (mean > model.q_term_confidence * std).float()
+        assert 0 < float(confident.sum()) < obs.shape[0]  # states of both kinds in the batch
+        terms = [(q_k, a * confident) for q_k, a in terms]
     scale = terms[0][0].abs().mean().detach().clamp_min(max(model.q_scale_floor_value or 0.0, 1e-6))
     # eq. 3's gamma^i, times lookahead_weight at the predicted states
     weights = [model.gamma**i * (model.lookahead_weight if i else 1.0) for i in range(model.rollout_length + 1)]
@@ -237,6 +246,9 @@ def _close(a: th.Tensor, b: th.Tensor) -> None:
         # ReBRAC's critic penalty
         {"critic_bc_coef": 0.5},
         {"critic_bc_coef": 2.0, "rollout_length": 0},
+        # the Q term only where the critic's members agree the actor's action beats the data's
+        {"q_term_confidence": 0.0},
+        {"q_term_confidence": 0.5, "rollout_length": 0},
     ],
 )
 def test_update_matches_reference(kwargs):
@@ -436,6 +448,7 @@ def test_compiled_mish_equals_mish():
         pytest.param(False, 0.0, 0.0, "actor", None, (0.0, "bellman"), id="trust-bellman"),
         pytest.param(False, 0.0, 0.0, "actor", None, "critic-bc", id="critic-bc"),
         pytest.param(False, 0.0, 0.0, "actor", None, "fallback", id="fallback"),
+        pytest.param(False, 0.0, 0.0, "actor", None, "q-confidence", id="q-confidence"),
     ],
 )
 def test_compiled_update_matches_eager(
@@ -458,7 +471,8 @@ def test_compiled_update_matches_eager(
     and a critic call inside the BC graph); with ``lookahead_trust`` (margin, rule) the look-ahead's mask from the
     critic's own values (and, by the Bellman rule, the model's rewards); ``"critic-bc"`` in its place: ReBRAC's
     critic penalty, the data's next actions in the critic's graph; ``"fallback"``: ``fallback_confidence``'s
-    imitation-only actor, its own loss graph and step.
+    imitation-only actor, its own loss graph and step; ``"q-confidence"``: ``q_term_confidence``'s mask from a critic
+    call at the data's actions inside the Q term's graph.
     """
     from torch._dynamo.utils import counters
 
@@ -483,6 +497,8 @@ def test_compiled_update_matches_eager(
     )
     if lookahead_trust == "critic-bc":
         kwargs["critic_bc_coef"] = 0.5
+    elif lookahead_trust == "q-confidence":
+        kwargs["q_term_confidence"] = 0.0
     elif lookahead_trust == "fallback":
         kwargs["policy_kwargs"] = {"net_arch": [16], "fallback_confidence": 1.0}
     elif lookahead_trust:

@@ -48,6 +48,11 @@ BAD_ARGUMENTS: list[tuple[dict[str, Any], str]] = [
     ({"lookahead_trust_rule": "q"}, "lookahead_trust_rule must be one of"),
     ({"lcb_coef": -1.0}, "lcb_coef must be None or a number >= 0.0"),
     ({"critic_bc_coef": -0.1}, "critic_bc_coef must be a number >= 0.0"),
+    ({"q_term_confidence": float("nan")}, "q_term_confidence must be"),
+    (
+        {"q_term_confidence": 1.0, "n_critics": 1, "top_k": 1, "critic_diversity": 0.0},
+        "q_term_confidence needs n_critics >= 2",
+    ),
     ({"critic_layer_norm": "yes"}, "critic_layer_norm must be one of False, True"),
     ({"max_grad_norm": 0.0}, "max_grad_norm must be None or a number > 0.0"),
     ({"ema_decay": 1.5}, "ema_decay must be a number in [0.0, 1.0]"),

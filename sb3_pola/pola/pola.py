@@ -124,6 +124,7 @@ def check_pola_arguments(
     lookahead_trust_rule: str,
     lcb_coef: float | None,
     critic_bc_coef: float,
+    q_term_confidence: float | None,
     critic_layer_norm: bool,
     eta_gate: str | None,
     eta_gate_fraction: float,
@@ -188,6 +189,9 @@ def check_pola_arguments(
     if lcb_coef is not None and n_critics < 2:
         raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
     check_float("critic_bc_coef", critic_bc_coef, low=0.0)
+    check_float("q_term_confidence", q_term_confidence, optional=True)
+    if q_term_confidence is not None and n_critics < 2:
+        raise HyperparameterError(f"q_term_confidence needs n_critics >= 2, got n_critics={n_critics}")
     check_choice("critic_layer_norm", critic_layer_norm, (False, True))
     check_choice("eta_gate", eta_gate, ETA_GATES)
     check_float("eta_gate_fraction", eta_gate_fraction, low=0.0, low_open=True)
@@ -385,6 +389,14 @@ class POLA(OfflineAlgorithm):
         ``target_q_floor``. The target then values a policy that stays near the data's actions in the future, so the
         Q term judges ``a`` by what follows it when the data's behaviour follows. ``0``: no penalty (the paper;
         default). ReBRAC uses 0.01 on hopper-medium, 0.5 on hopper-medium-replay
+    :param q_term_confidence: ``k``: each state's terms of eq. 3/4 (the current state and its predicted states) count
+        only where the critic's members agree the actor's action beats the data's, ``mean_j d_j > k std_j d_j`` with
+        ``d_j = Q_j(s, a_t) - Q_j(s, a_data)`` (no gradient); elsewhere the actor only imitates. The test of the
+        policy option ``fallback_confidence`` made while training one actor, so ``predict`` costs nothing more. At
+        ``k = 1`` it lifted hopper/medium's narrow file from 34.0 to 40.9 and broke the sparse medium maze, where
+        the members rarely agree (docs/results.md, thirty-seventh pass): for dense rewards only. The share of the
+        batch whose terms count is logged as ``train/q_term_share``. ``None``: every state counts (the paper;
+        default). Needs ``n_critics >= 2``
     :param critic_layer_norm: LayerNorm in the critics' hidden layers (ReBRAC): it bounds Q off the data, so the Q term
         can pull at the paper's strength without the actor climbing the critic's extrapolation. Passed to the policy
         (a ``critic_layer_norm`` in ``policy_kwargs`` takes precedence). Default ``True``; ``False``: plain MLP
@@ -524,6 +536,7 @@ class POLA(OfflineAlgorithm):
         lookahead_trust_rule: str = "value",
         lcb_coef: float | None = None,
         critic_bc_coef: float = 0.0,
+        q_term_confidence: float | None = None,
         critic_layer_norm: bool = True,
         eta_gate: str | None = "critic_maturity",
         eta_gate_fraction: float = 0.1,
@@ -579,6 +592,7 @@ class POLA(OfflineAlgorithm):
             lookahead_trust_rule=lookahead_trust_rule,
             lcb_coef=lcb_coef,
             critic_bc_coef=critic_bc_coef,
+            q_term_confidence=q_term_confidence,
             critic_layer_norm=critic_layer_norm,
             eta_gate=eta_gate,
             eta_gate_fraction=eta_gate_fraction,
@@ -649,6 +663,7 @@ class POLA(OfflineAlgorithm):
         self.lookahead_trust_rule = lookahead_trust_rule
         self.lcb_coef = lcb_coef
         self.critic_bc_coef = critic_bc_coef
+        self.q_term_confidence = q_term_confidence
         # critic_bc_coef: 1 where a row's episode goes on (its next action is the next row's), [N]
         self._next_data_mask: th.Tensor | None = None
         self.eta_gate = eta_gate
@@ -1035,7 +1050,7 @@ class POLA(OfflineAlgorithm):
             actor_stats["q_loss"] = th.zeros_like(actor_loss)
         else:
             with self._critic_frozen():
-                q_term, q_stats = self._q_term_fn(actor_obs, self._eta_value)
+                q_term, q_stats = self._q_term_fn(actor_obs, self._eta_value, actor_actions)
             q_term.backward()
             actor_loss = actor_loss + q_term.detach()
             actor_stats.update(q_stats)
@@ -1079,7 +1094,7 @@ class POLA(OfflineAlgorithm):
             features = self.policy.actor_features(obs)
             bc_loss, _ = self._bc_loss(obs, actions, self._bc_temp_value)  # L_d as trained (weighted if bc_weight_temp)
             bc_grads = th.autograd.grad(bc_loss, params, allow_unused=True)
-            q_loss, _ = self._lookahead_q_loss(obs, features)
+            q_loss, _ = self._lookahead_q_loss(obs, features, actions)
             q_grads = th.autograd.grad(self._eta_value * q_loss, params, allow_unused=True)
 
         def norm(grads: tuple[th.Tensor | None, ...]) -> th.Tensor:
@@ -1206,9 +1221,12 @@ class POLA(OfflineAlgorithm):
         loss = self.policy.fallback_actor.loss(actions, self.policy.actor_features(obs))
         return loss, {"fallback_bc_loss": loss.detach()}
 
-    def _q_term(self, obs: th.Tensor, eta: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
-        """``eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor)."""
-        q_loss, stats = self._lookahead_q_loss(obs, self.policy.actor_features(obs))
+    def _q_term(
+        self, obs: th.Tensor, eta: th.Tensor, actions: th.Tensor | None = None
+    ) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """``eta * L_q`` (eq. 6 and eq. 3/4); ``eta`` is this step's value of the schedule (a 0-d tensor), ``actions``
+        the batch's data actions (``q_term_confidence``)."""
+        q_loss, stats = self._lookahead_q_loss(obs, self.policy.actor_features(obs), actions)
         return eta * q_loss, {"q_loss": q_loss.detach(), **stats}
 
     def _model_step(self, state: th.Tensor, action: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]:
@@ -1227,8 +1245,12 @@ class POLA(OfflineAlgorithm):
             terminal = th.maximum(terminal, (disagreement.detach() > self.lookahead_uncertainty_cutoff).float())
         return next_state, reward * self.reward_scale, terminal, disagreement
 
-    def _lookahead_q_loss(self, obs: th.Tensor, features: th.Tensor) -> tuple[th.Tensor, dict[str, th.Tensor]]:
-        """``L_q`` of eq. 4: top-K pessimistic Q at ``s_t`` and at ``T`` model-predicted states, weighted by ``gamma^i``."""
+    def _lookahead_q_loss(
+        self, obs: th.Tensor, features: th.Tensor, data_actions: th.Tensor | None = None
+    ) -> tuple[th.Tensor, dict[str, th.Tensor]]:
+        """``L_q`` of eq. 4: top-K pessimistic Q at ``s_t`` and at ``T`` model-predicted states, weighted by ``gamma^i``
+        (under ``q_term_confidence``, only at the states where the critic's members agree ``a_t`` beats
+        ``data_actions``, ``[B, A]``)."""
         policy, horizon = self.policy, self.rollout_length
         batch_size = obs.shape[0]
         action = self._sample_actor(features)  # a_t = pi(s_t), differentiable through the reverse chain
@@ -1266,6 +1288,13 @@ class POLA(OfflineAlgorithm):
                 trusted = (judged <= bound).float()  # [T, B]
                 q_all = (alive_mask * q_pess).mean(dim=1)  # [T+1]: the diagnostics keep every alive term
             counted = alive_mask * th.cat([th.ones_like(trusted[:1]), trusted])  # [T+1, B]
+        confidence = getattr(self, "q_term_confidence", None)  # models saved before the option have none
+        confident = None
+        if confidence is not None and data_actions is not None:
+            with th.no_grad():  # d_j = Q_j(s_t, a_t) - Q_j(s_t, a_data): the state's terms count where mean > k std
+                gain = q.view(-1, horizon + 1, batch_size)[:, 0] - self.critic(obs, data_actions)  # [N, B]
+                confident = (gain.mean(dim=0) > confidence * gain.std(dim=0)).to(counted.dtype)  # [B]
+            counted = counted * confident
         objective: Callable[..., tuple[th.Tensor, th.Tensor]] = lookahead_q_objective  # eq. 3/4
         powers = self._lookahead_powers
         if self.lookahead_target == "value_expansion" and horizon > 0:
@@ -1287,6 +1316,8 @@ class POLA(OfflineAlgorithm):
             stats.update({f"lookahead_q_{i}": q_all[i] for i in range(horizon + 1)})
             stats["lookahead_trusted"] = trusted.mean()
         stats["action_saturation"] = saturation
+        if confident is not None:
+            stats["q_term_share"] = confident.mean()
         # the ensemble's spread at the actor's own actions (next to q_ensemble_std at the data's): pessimism
         # protects the actor only where the members disagree more off the data than on it
         stats["policy_q_ensemble_std"] = q.detach().view(-1, horizon + 1, batch_size)[:, 0].std(dim=0).mean()
