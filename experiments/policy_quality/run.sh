@@ -1038,3 +1038,15 @@ for d in pointmaze/umaze-v0 pointmaze/medium-v0 halfcheetah/medium-v0 halfcheeta
 done
 "$PY" -m sb3_pola.benchmarks.train_bench --quick --only "paper hopper" "defaults hopper" "defaults hopper, fallback actor" > "$OUT/bench_fallback_train.json"
 "$PY" experiments/policy_quality/bench_fallback_predict.py > "$OUT/bench_fallback_predict.json"
+
+# --- thirty-seventh pass (stop 64): the confident choice made in training (q_term_confidence, k = 1; QC1), eager,
+# seeds 0-2 on the hopper files and halfcheetah/medium-replay, 0-1 on halfcheetah/medium, 0 on the mazes (screen
+# rows, collection amd-q-confidence). Seed 0 of every dataset and seed 2 of the hopper files were made by a run-folder
+# draft of the option (the same mask), which the option reproduces to the digit on hopper/medium seed 1 (41.4).
+QC1='"compile_update": false, "use_state_products": false, "policy_kwargs": {"actor_activation_fn": "ReLU", "net_arch": {"pi": [256, 256], "qf": [128, 128]}}, "q_term_confidence": 1.0'
+for d in hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
+  for s in 0 1 2; do
+    case "$d" in pointmaze/*) [ "$s" = 0 ] || continue ;; halfcheetah/medium-v0) [ "$s" = 2 ] && continue ;; esac
+    screen --dataset "$d" --seed "$s" --rules mode --name QC1 --kwargs "{$QC1}"
+  done
+done
