@@ -42,7 +42,7 @@ from sb3_pola.pola.losses import (
     value_expansion_objective,
     value_lower_bound,
 )
-from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy
+from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy, members_agree
 
 SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
 
@@ -1293,7 +1293,7 @@ class POLA(OfflineAlgorithm):
         if confidence is not None and data_actions is not None:
             with th.no_grad():  # d_j = Q_j(s_t, a_t) - Q_j(s_t, a_data): the state's terms count where mean > k std
                 gain = q.view(-1, horizon + 1, batch_size)[:, 0] - self.critic(obs, data_actions)  # [N, B]
-                confident = (gain.mean(dim=0) > confidence * gain.std(dim=0)).to(counted.dtype)  # [B]
+                confident = members_agree(gain, confidence).to(counted.dtype)  # [B]
             counted = counted * confident
         objective: Callable[..., tuple[th.Tensor, th.Tensor]] = lookahead_q_objective  # eq. 3/4
         powers = self._lookahead_powers

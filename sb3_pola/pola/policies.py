@@ -52,13 +52,18 @@ def _check_predict_arguments(
             raise ValueError("fallback_confidence chooses between two actions; it needs n_action_samples=1")
 
 
+def members_agree(gain: th.Tensor, k: float) -> th.Tensor:
+    """``[B]`` bool: where the critic's members agree on a gain, ``mean_j d_j > k std_j d_j`` over ``gain`` ``[N, B]``
+    (``d_j = Q_j(s, a) - Q_j(s, a_other)``): the test of ``fallback_confidence`` and of ``q_term_confidence``."""
+    return gain.mean(dim=0) > k * gain.std(dim=0)
+
+
 def choose_confident(q: th.Tensor, action: th.Tensor, fallback: th.Tensor, k: float) -> th.Tensor:
     """``fallback_confidence``'s rule: ``action`` ``[B, A]`` where the critic's members agree it beats ``fallback``
-    (``mean_j d_j > k std_j d_j``, ``d_j = Q_j(s, action) - Q_j(s, fallback)``), else ``fallback``. ``q`` ``[N, 2B]``:
-    the members' values at the ``B`` actions, then at the ``B`` fallbacks (``predict`` and the export graph)."""
+    (:func:`members_agree`), else ``fallback``. ``q`` ``[N, 2B]``: the members' values at the ``B`` actions, then at
+    the ``B`` fallbacks (``predict`` and the export graph)."""
     q = q.view(q.shape[0], 2, action.shape[0])  # [N, 2, B]
-    gain = q[:, 0] - q[:, 1]  # [N, B]
-    take = gain.mean(dim=0) > k * gain.std(dim=0)  # [B]
+    take = members_agree(q[:, 0] - q[:, 1], k)  # [B]
     return th.where(take.unsqueeze(1), action, fallback)
 
 
