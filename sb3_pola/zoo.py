@@ -42,14 +42,8 @@ import gymnasium as gym
 from gymnasium.envs.registration import parse_env_id
 
 from sb3_pola.common.callbacks import NormalizedScoreEvalCallback
-from sb3_pola.common.datasets import (
-    D4RL_KINDS,
-    DatasetError,
-    DatasetNotFoundError,
-    list_local_datasets,
-    make_env,
-    resolve_dataset_path,
-)
+from sb3_pola.common.dataset_paths import DatasetError, DatasetNotFoundError, list_local_datasets, resolve_dataset_path
+from sb3_pola.common.datasets import D4RL_KINDS, make_env
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
 from sb3_pola.pola.pola import POLA
 
@@ -351,7 +345,7 @@ def check_env_option(dataset_envs: dict[str, str], env_id: str | None) -> None:
 
     :param dataset_envs: ``{env id: dataset id}`` of the registered dataset envs
     :param env_id: the ``--env`` given (``None``: the zoo's default)
-    :raises ~sb3_pola.common.datasets.DatasetNotFoundError: neither
+    :raises ~sb3_pola.common.dataset_paths.DatasetNotFoundError: neither
     """
     if env_id is None or env_id in gym.registry:
         return

@@ -21,7 +21,7 @@ from sb3_pola.collect.maze import (
     require_robotics,
     shortest_path,
 )
-from sb3_pola.common.datasets import package_datasets_dir
+from sb3_pola.common.dataset_paths import package_datasets_dir
 from sb3_pola.common.errors import UsageError
 
 U_MAZE = [

@@ -17,8 +17,8 @@ import pytest
 from helpers import ACT_HIGH, ACT_LOW, EPISODES, OBS_DIM, make_episodes, write_minari_dataset
 
 from sb3_pola.cli import datasets as datasets_cli
+from sb3_pola.common import dataset_paths, metrics
 from sb3_pola.common import datasets as ds
-from sb3_pola.common import metrics
 from sb3_pola.common.datasets import (
     DatasetError,
     DatasetNotFoundError,
@@ -101,7 +101,7 @@ def test_path_and_object_inputs(tiny_dataset, tiny_datasets_root):
 def test_shipped_folder_is_searched(tmp_path, monkeypatch):
     shipped = tmp_path / "shipped"
     write_minari_dataset(shipped, "pkg/ship-v0", make_episodes())
-    monkeypatch.setattr(ds, "package_datasets_dir", lambda: shipped)
+    monkeypatch.setattr(dataset_paths, "package_datasets_dir", lambda: shipped)
     assert "pkg/ship-v0" in list_local_datasets()
     assert len(load_offline_dataset("pkg/ship-v0")) == N_STEPS
 

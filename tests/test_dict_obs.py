@@ -12,14 +12,8 @@ from helpers import light_kwargs, record_random_dataset
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_pola import POLA
-from sb3_pola.common.datasets import (
-    DatasetError,
-    OfflineDataset,
-    load_offline_dataset,
-    make_env,
-    package_datasets_dir,
-    synthetic_dataset,
-)
+from sb3_pola.common.dataset_paths import DatasetError, package_datasets_dir
+from sb3_pola.common.datasets import OfflineDataset, load_offline_dataset, make_env, synthetic_dataset
 from sb3_pola.common.dict_obs import check_dict_space, flatten_observation
 
 KEYS = ["achieved_goal", "desired_goal", "observation"]  # Gymnasium's (sorted) order, the flattening order

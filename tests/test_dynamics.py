@@ -13,16 +13,8 @@ import torch as th
 import torch.nn.functional as F
 
 from sb3_pola.common.dynamics import EnsembleDynamics
-from sb3_pola.common.dynamics_trainer import (
-    BootstrapBatches,
-    DynamicsTrainer,
-    EarlyStopping,
-    Transitions,
-    holdout_scores,
-    holdout_split,
-    select_elites,
-    split_statistics,
-)
+from sb3_pola.common.dynamics_data import BootstrapBatches, Transitions, holdout_split, split_statistics
+from sb3_pola.common.dynamics_trainer import DynamicsTrainer, EarlyStopping, holdout_scores, select_elites
 from sb3_pola.common.torch_layers import VectorizedLinear
 
 OBS_DIM, ACT_DIM = 5, 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import pathlib
 import zipfile
 
@@ -107,3 +108,15 @@ def test_actor_activation_is_the_actors_own_and_saved(tiny_dataset: str, tmp_pat
     assert nn.ReLU in kinds(loaded.policy.actor) and nn.ReLU not in kinds(loaded.policy.critic)
     obs = model.policy.observation_space.sample()[None]
     assert (model.predict(obs, deterministic=True)[0] == loaded.predict(obs, deterministic=True)[0]).all()
+
+
+def test_saved_data_holds_no_network(saved_model) -> None:
+    """The file's JSON part keeps hyperparameters and spaces only: the networks are in ``policy.pth``, and what
+    ``_setup_model`` rebuilds (the chain's sampler holds the actor) must not be pickled into it as well."""
+    _, path = saved_model
+    with zipfile.ZipFile(path) as archive:
+        data = json.loads(archive.read("data"))
+    pickled = {
+        key: len(value[":serialized:"]) for key, value in data.items() if isinstance(value, dict) and ":serialized:" in value
+    }
+    assert "policy_class" in pickled and max(pickled.values()) < 16_000, pickled  # the light model's actor pickled: ~70 kB

@@ -11,17 +11,16 @@ from typing import Any
 
 from sb3_pola.common.arguments import ArgumentParser
 from sb3_pola.common.dataset_cache import cache_entries, remove_entry
-from sb3_pola.common.datasets import (
+from sb3_pola.common.dataset_paths import (
     DatasetError,
-    _env_id,
-    _scan,
-    _search_roots,
-    default_cache_dir,
-    load_offline_dataset,
+    metadata_env_id,
     minari_root_label,
     package_datasets_dir,
     read_metadata,
+    scan_datasets,
+    search_roots,
 )
+from sb3_pola.common.datasets import default_cache_dir, load_offline_dataset
 from sb3_pola.common.dynamics_cache import dynamics_entries
 
 
@@ -47,8 +46,8 @@ def check_dataset(data_dir: Any) -> str:
 def list_datasets(check: bool) -> int:
     rows: list[tuple[str, ...]] = []
     seen, broken = set(), 0
-    for root in _search_roots():
-        for dataset_id, data_dir in _scan(root).items():
+    for root in search_roots():
+        for dataset_id, data_dir in scan_datasets(root).items():
             if dataset_id in seen:
                 continue  # the Minari folder shadows the shipped copy, as in load_offline_dataset
             seen.add(dataset_id)
@@ -62,7 +61,7 @@ def list_datasets(check: bool) -> int:
                 dataset_id,
                 str(meta.get("total_steps", "?")),
                 str(meta.get("total_episodes", "?")),
-                _env_id(meta) or "?",
+                metadata_env_id(meta) or "?",
                 str(meta.get("ref_min_score", "-")),
                 str(meta.get("ref_max_score", "-")),
                 str(root),

@@ -126,7 +126,7 @@ def write_dataset(
 
 def collect_command() -> dict[str, str]:
     """``{"collect_command": "sb3-pola collect ..."}``, the command that is recording the dataset, for its metadata
-    (a corrupt copy is then re-collected with it, see :func:`~sb3_pola.common.datasets.corrupt_dataset_message`);
+    (a corrupt copy is then re-collected with it, see :func:`~sb3_pola.common.dataset_paths.corrupt_dataset_message`);
     empty when not run as ``sb3-pola collect``."""
     argv = sys.argv[1:]
     if not argv or argv[0] != "collect":

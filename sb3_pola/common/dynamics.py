@@ -277,7 +277,7 @@ class EnsembleDynamics(nn.Module):
     def set_normalization(self, stats: NormalizationStats) -> None:
         """Standardise inputs and targets with these statistics from now on.
 
-        :param stats: statistics of the training split (:func:`split_statistics`)
+        :param stats: statistics of the training split (:func:`~sb3_pola.common.dynamics_data.split_statistics`)
         """
         self.obs_mean.copy_(stats.input_mean[: self.obs_dim])
         self.obs_std.copy_(stats.input_std[: self.obs_dim])

@@ -59,7 +59,7 @@ def episode_lengths(dataset_id: str) -> np.ndarray:
     """Length of each episode of a Minari dataset, in order (from the episodes' metadata, else their rewards)."""
     from minari.dataset.minari_storage import MinariStorage
 
-    from sb3_pola.common.datasets import resolve_dataset_path
+    from sb3_pola.common.dataset_paths import resolve_dataset_path
 
     storage = MinariStorage.read(resolve_dataset_path(dataset_id))
     n_episodes = int(storage.metadata.get("total_episodes", storage.total_episodes))
