@@ -45,6 +45,8 @@ lint: $(STAMP)
 	$(PY) -m ruff format --check sb3_pola tests experiments
 	$(VENV)/bin/lint-imports
 	@for f in $$(git ls-files 'experiments/*.sh'); do bash -n "$$f" || exit 1; done
+	@# no module over 600 lines (#24)
+	@find sb3_pola -name '*.py' -exec wc -l {} + | awk '$$2 != "total" && $$1 > 600 {print "over 600 lines: " $$2 " (" $$1 ")"; bad = 1} END {exit bad}'
 
 format: $(STAMP)
 	$(PY) -m ruff format sb3_pola tests experiments
