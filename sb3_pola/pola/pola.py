@@ -5,7 +5,7 @@ from __future__ import annotations
 import inspect
 import os
 import pathlib
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar
 
 import torch as th
 from stable_baselines3.common.policies import BasePolicy
@@ -23,8 +23,6 @@ from sb3_pola.pola.losses import ensemble_similarity, lookahead_q_objective, loo
 from sb3_pola.pola.objectives import POLAObjectives
 from sb3_pola.pola.policies import DiffusionActor, EnsembleCritic, MlpPolicy, POLAPolicy
 from sb3_pola.pola.preparation import POLAData
-
-SelfPOLA = TypeVar("SelfPOLA", bound="POLA")
 
 
 def _lerp_params(params: Any, target_params: Any, tau: float) -> None:
