@@ -1050,3 +1050,15 @@ for d in hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfchee
     screen --dataset "$d" --seed "$s" --rules mode --name QC1 --kwargs "{$QC1}"
   done
 done
+
+# --- thirty-eighth pass (stop 65): q_term_confidence on the seeds the thirty-seventh pass left out (k = 1: both mazes
+# seeds 1-2, halfcheetah/medium seed 2) and a softer gate (k = 0; QC0) at seed 0 on the medium maze, hopper/medium and
+# the U-maze (screen rows, collection amd-q-confidence).
+for d in pointmaze/umaze-v0 pointmaze/medium-v0; do
+  for s in 1 2; do screen --dataset "$d" --seed "$s" --rules mode --name QC1 --kwargs "{$QC1}"; done
+done
+screen --dataset halfcheetah/medium-v0 --seed 2 --rules mode --name QC1 --kwargs "{$QC1}"
+QC0="${QC1%1.0}0.0"
+for d in pointmaze/medium-v0 hopper/medium-v0 pointmaze/umaze-v0; do
+  screen --dataset "$d" --seed 0 --rules mode --name QC0 --kwargs "{$QC0}"
+done
