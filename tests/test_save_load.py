@@ -120,3 +120,23 @@ def test_saved_data_holds_no_network(saved_model) -> None:
         key: len(value[":serialized:"]) for key, value in data.items() if isinstance(value, dict) and ":serialized:" in value
     }
     assert "policy_class" in pickled and max(pickled.values()) < 16_000, pickled  # the light model's actor pickled: ~70 kB
+
+
+def test_file_from_before_an_argument_loads_with_its_default(saved_model, tmp_path: pathlib.Path) -> None:
+    """A file saved before an argument existed has no key for it: loading runs ``__init__`` first, so the model gets
+    the argument's default (no ``getattr`` fallback needed where the argument is read) and trains."""
+    _, path = saved_model
+    newer = {"q_term_confidence": None, "lookahead_trust_margin": None, "lookahead_trust_rule": "value"}
+    newer |= {"bc_learning_rate": None, "dynamics_cache": True}
+    old_path = tmp_path / "old.zip"
+    with zipfile.ZipFile(path) as source, zipfile.ZipFile(old_path, "w") as target:
+        for item in source.infolist():
+            content = source.read(item.filename)
+            if item.filename == "data":
+                data = json.loads(content)
+                assert newer.keys() <= data.keys()
+                content = json.dumps({k: v for k, v in data.items() if k not in newer}).encode()
+            target.writestr(item, content)
+    model = POLA.load(old_path, device="cpu")
+    assert {key: getattr(model, key) for key in newer} == newer
+    model.learn(2)

@@ -56,6 +56,9 @@ class POLAObjectives(OfflineAlgorithm):
     lookahead_normalization: str
     lookahead_uncertainty_penalty: float
     lookahead_uncertainty_cutoff: float | None
+    lookahead_trust_margin: float | None
+    lookahead_trust_rule: str
+    q_term_confidence: float | None
     q_scale_floor_value: float | None
     _goal_mask: th.Tensor | None
     _termination_fn: TerminationFn | None
@@ -267,16 +270,16 @@ class POLAObjectives(OfflineAlgorithm):
             actions_.append(action)
 
         # all T + 1 critic evaluations in one ensemble call (the caller has switched off the critic's gradients)
-        q = self.critic(th.cat(states), th.cat(actions_))  # [N, (T+1) B]
+        q = self.critic(th.cat(states), th.cat(actions_)).view(-1, horizon + 1, batch_size)  # [N, T+1, B]
         alive_mask = th.stack(alive)  # [T+1, B]
         counted, trusted = alive_mask, None  # counted: the terms eq. 3 sums, [T+1, B]
-        margin = getattr(self, "lookahead_trust_margin", None)  # models saved before the option have none
+        margin = self.lookahead_trust_margin
         if margin is not None and horizon > 0:
             with th.no_grad():  # a predicted state valued above the current one by more than the margin is left out
-                q_pess = pessimistic_q(q.view(-1, horizon + 1, batch_size), self.top_k, self.lcb_coef)  # [T+1, B]
+                q_pess = pessimistic_q(q, self.top_k, self.lcb_coef)  # [T+1, B]
                 bound = q_pess[0] + margin * q_pess[0].abs().mean()  # [B]
                 judged = q_pess[1:]  # [T, B]
-                if getattr(self, "lookahead_trust_rule", "value") == "bellman":  # old models: "value"
+                if self.lookahead_trust_rule == "bellman":
                     # the rollout read as the critic's own chain: sum_{j<i} gamma^j r_j + gamma^i Q(s_i, a_i)
                     discounts = self._gamma_powers[:, None]  # [T+1, 1]: gamma^i
                     paid = th.cumsum(discounts[:-1] * alive_mask[:-1] * th.stack(rewards), dim=0)  # [T, B]
@@ -284,11 +287,11 @@ class POLAObjectives(OfflineAlgorithm):
                 trusted = (judged <= bound).float()  # [T, B]
                 q_all = (alive_mask * q_pess).mean(dim=1)  # [T+1]: the diagnostics keep every alive term
             counted = alive_mask * th.cat([th.ones_like(trusted[:1]), trusted])  # [T+1, B]
-        confidence = getattr(self, "q_term_confidence", None)  # models saved before the option have none
+        confidence = self.q_term_confidence
         confident = None
         if confidence is not None and data_actions is not None:
             with th.no_grad():  # d_j = Q_j(s_t, a_t) - Q_j(s_t, a_data): the state's terms count where mean > k std
-                gain = q.view(-1, horizon + 1, batch_size)[:, 0] - self.critic(obs, data_actions)  # [N, B]
+                gain = q[:, 0] - self.critic(obs, data_actions)  # [N, B]
                 confident = members_agree(gain, confidence).to(counted.dtype)  # [B]
             counted = counted * confident
         objective: Callable[..., tuple[th.Tensor, th.Tensor]] = lookahead_q_objective  # eq. 3/4
@@ -299,7 +302,7 @@ class POLAObjectives(OfflineAlgorithm):
             )
             powers = self._gamma_powers
         q_loss, per_step = objective(
-            q.view(-1, horizon + 1, batch_size),  # [N, T+1, B]
+            q,
             alive=counted,
             gamma_powers=powers,
             top_k=self.top_k,
@@ -316,7 +319,7 @@ class POLAObjectives(OfflineAlgorithm):
             stats["q_term_share"] = confident.mean()
         # the ensemble's spread at the actor's own actions (next to q_ensemble_std at the data's): pessimism
         # protects the actor only where the members disagree more off the data than on it
-        stats["policy_q_ensemble_std"] = q.detach().view(-1, horizon + 1, batch_size)[:, 0].std(dim=0).mean()
+        stats["policy_q_ensemble_std"] = q.detach()[:, 0].std(dim=0).mean()
         stats["lookahead_alive"] = alive_mask[-1].mean()
         if horizon > 0:
             doubt = th.stack(disagreements).mean(dim=1)  # [T]

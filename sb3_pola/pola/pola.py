@@ -375,9 +375,7 @@ class POLA(POLAObjectives, POLAData):
         self.critic_lr_schedule: Schedule | None = None
         if self.critic_learning_rate is not None:  # the critics' own rate (the actor keeps learning_rate)
             self.critic_lr_schedule = FloatSchedule(self.critic_learning_rate)
-        # models saved before the argument have none: the actor's one rate
-        bc_learning_rate = getattr(self, "bc_learning_rate", None)
-        self.bc_lr_schedule = None if bc_learning_rate is None else FloatSchedule(bc_learning_rate)
+        self.bc_lr_schedule = None if self.bc_learning_rate is None else FloatSchedule(self.bc_learning_rate)
         self._bc_lr: float | None = None if self.bc_lr_schedule is None else float(self.bc_lr_schedule(1.0))
         self.eta_schedule = FloatSchedule(self.eta)
         self.set_random_seed(self.seed)

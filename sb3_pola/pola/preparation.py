@@ -53,6 +53,7 @@ class POLAData(OfflineAlgorithm):
     goal_switches: str | None
     hindsight_goals: bool
     dynamics_fit_kwargs: dict[str, Any]
+    dynamics_cache: bool
 
     def _init_data_state(self) -> None:
         """What the preparation derives from the data, before it is loaded (by ``POLA.__init__``)."""
@@ -197,7 +198,7 @@ class POLAData(OfflineAlgorithm):
         (``dynamics_cache``)."""
         dynamics, data = self.policy.dynamics, self._offline_data
         assert dynamics is not None
-        if not getattr(self, "dynamics_cache", True):  # models saved before #25 have no such attribute
+        if not self.dynamics_cache:
             return fit()
         data_key = data_fingerprint(data.fingerprint if data is not None else None, arrays)
         result_kwargs = {k: v for k, v in fit_kwargs.items() if k not in ("progress_bar", "logger", "verbose")}
