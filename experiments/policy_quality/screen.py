@@ -14,7 +14,10 @@ loads again only with the same flags). ``--actor-weight-decay WD`` trains the ac
 ``torch.optim.AdamW(weight_decay=WD)`` (the critics keep Adam). ``--goal-relative`` appends ``(desired_goal -
 achieved_goal) / std(desired_goal)`` to the normalised state of goal-conditioned data before the products, in every
 network (screens only; loads again only with the flag). ``--eta-after FRACTION ETA`` trains at the kwargs' ``eta``
-until that fraction of ``--steps``, then at ``ETA`` (a step in the Q term's weight; screens only). The model is
+until that fraction of ``--steps``, then at ``ETA`` (a step in the Q term's weight; screens only).
+``--imitation-rows N`` draws the actor's batches (its ``L_d`` and its Q term's states) from the dataset's first N
+transitions, the critics' from all: with ``top_episodes.py --keep-all`` the actor learns from the best episodes only
+(screens only; the dynamics fit would see those rows only, so give the folder the full dataset's ``dynamics.pt``). The model is
 saved in ``OUT/<dataset>/<name>/seed<S>.zip`` (``OUT``: ``outputs/policy_quality``); a second call with the same
 name and seed evaluates the saved model (e.g. under another rule). The dynamics model is fitted once per dataset and
 reused (``dynamics.pt``). One JSON line per run, appended to ``OUT/screen.jsonl``; ``--episodes`` above 10 adds the
@@ -145,6 +148,35 @@ def eta_step(before: float, fraction: float, after: float) -> Any:
     return schedule
 
 
+def train_model(
+    args: argparse.Namespace,
+    data: Any,
+    kwargs: dict[str, Any],
+    policy_kwargs: dict[str, Any],
+    folder: pathlib.Path,
+    model_path: pathlib.Path,
+) -> POLA:
+    """A new model trained for ``--steps`` (the folder's shared dynamics fit loaded if there is one) and saved."""
+    model = POLA("MlpPolicy", dataset=data, seed=args.seed, policy_kwargs=policy_kwargs, **kwargs)
+    if args.raw_states:
+        obs_dim = model.policy.observation_space.shape[0]  # type: ignore[index]
+        model.policy.set_normalization(np.zeros(obs_dim), np.ones(obs_dim))
+    if args.imitation_rows:  # the critics train on every transition, the actor (L_d and the Q term) on these
+        model._n_imitation_rows = args.imitation_rows
+    dynamics = folder / "dynamics.pt"
+    shared = kwargs.get("dynamics_kwargs") == CPU["dynamics_kwargs"]
+    if model.policy.dynamics is not None and shared and dynamics.exists():
+        model.policy.dynamics.load_state_dict(th.load(dynamics))
+        model.policy.dynamics_fitted.fill_(True)
+    # train/ statistics (critic_maturity, q_mean, ...) in OUT/<dataset>/<name>/seed<S>/progress.csv
+    model.set_logger(configure(str(folder / args.name / f"seed{args.seed}"), ["csv"]))
+    model.learn(args.steps)
+    if model.policy.dynamics is not None and shared and not dynamics.exists():
+        th.save(model.policy.dynamics.state_dict(), dynamics)
+    model.save(model_path)
+    return model
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--dataset", required=True)
@@ -160,6 +192,12 @@ def main() -> None:
     parser.add_argument("--actor-dropout", type=float, default=0.0, help="dropout in the actor's trunk (a new model)")
     parser.add_argument("--actor-weight-decay", type=float, default=0.0, help="the actor's AdamW decay (a new model)")
     parser.add_argument("--goal-relative", action="store_true", help="desired - achieved goal as inputs (mazes)")
+    parser.add_argument(
+        "--imitation-rows",
+        type=int,
+        default=0,
+        help="the actor's batches from the first N transitions only (top_episodes.py --keep-all; a new model)",
+    )
     parser.add_argument("--eta-after", nargs=2, type=float, metavar=("FRACTION", "ETA"), help="eta's value after")
     args = parser.parse_args()
     th.set_num_threads(1)
@@ -188,21 +226,7 @@ def main() -> None:
     if model_path.exists():
         model = POLA.load(model_path)
     else:
-        model = POLA("MlpPolicy", dataset=data, seed=args.seed, policy_kwargs=policy_kwargs, **kwargs)
-        if args.raw_states:
-            obs_dim = model.policy.observation_space.shape[0]  # type: ignore[index]
-            model.policy.set_normalization(np.zeros(obs_dim), np.ones(obs_dim))
-        dynamics = folder / "dynamics.pt"
-        shared = kwargs.get("dynamics_kwargs") == CPU["dynamics_kwargs"]
-        if model.policy.dynamics is not None and shared and dynamics.exists():
-            model.policy.dynamics.load_state_dict(th.load(dynamics))
-            model.policy.dynamics_fitted.fill_(True)
-        # train/ statistics (critic_maturity, q_mean, ...) in OUT/<dataset>/<name>/seed<S>/progress.csv
-        model.set_logger(configure(str(folder / args.name / f"seed{args.seed}"), ["csv"]))
-        model.learn(args.steps)
-        if model.policy.dynamics is not None and shared and not dynamics.exists():
-            th.save(model.policy.dynamics.state_dict(), dynamics)
-        model.save(model_path)
+        model = train_model(args, data, kwargs, policy_kwargs, folder, model_path)
     env = make_env(data)
     row: dict[str, Any] = {"dataset": args.dataset, "name": args.name, "seed": args.seed, "steps": args.steps}
     row["episodes"] = args.episodes

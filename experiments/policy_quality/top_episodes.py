@@ -7,8 +7,9 @@ can find.
 
 The new dataset is written under ``$MINARI_DATASETS_PATH`` (or ``--root``) with the source's env, evaluation env and
 reference scores, so its scores are normalised as the source's are; its metadata names the source and the fraction.
-Ties at the cut keep the earlier episodes. Prints one JSON line: episodes and steps kept, their mean normalised
-return against the source's.
+Ties at the cut keep the earlier episodes. ``--keep-all`` writes every episode, the best first (their transitions are
+the first ``first_rows``), for ``screen.py --imitation-rows``: the actor trains on the best episodes, the critics on all.
+Prints one JSON line: episodes and steps written, the best episodes' mean normalised return against the source's.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from gymnasium.envs.registration import EnvSpec
 from minari.data_collector import EpisodeBuffer
 
 from sb3_pola.collect.writer import datasets_root, write_dataset
+from sb3_pola.common.dataset_paths import resolve_dataset_path
 
 
 def main() -> None:
@@ -31,16 +33,24 @@ def main() -> None:
     parser.add_argument("--fraction", type=float, required=True, help="share of the episodes kept, best first")
     parser.add_argument("--out-id", required=True, help="the new dataset's id")
     parser.add_argument("--root", default=None, help="datasets root (default $MINARI_DATASETS_PATH)")
+    parser.add_argument(
+        "--keep-all",
+        action="store_true",
+        help="write every episode, the best fraction first (screen.py --imitation-rows: the actor's rows come first)",
+    )
     parser.add_argument("--overwrite", action="store_true")
     args = parser.parse_args()
     if not 0 < args.fraction <= 1:
         parser.error("--fraction must be in (0, 1]")
 
-    source = minari.load_dataset(args.dataset)
+    source = minari.MinariDataset(resolve_dataset_path(args.dataset))  # Minari's folder or the package's
     episodes = list(source.iterate_episodes())
     returns = np.array([float(np.sum(episode.rewards)) for episode in episodes])
     n_kept = max(1, math.ceil(args.fraction * len(episodes)))
     kept = np.sort(np.argsort(-returns, kind="stable")[:n_kept])  # best first, then back in the file's order
+    first_rows = int(sum(len(episodes[i].rewards) for i in kept))
+    if args.keep_all:
+        kept = np.concatenate([kept, np.setdiff1d(np.arange(len(episodes)), kept)])
     buffers = [
         EpisodeBuffer(
             id=new_id,
@@ -62,11 +72,13 @@ def main() -> None:
         ref_min=ref_min,
         ref_max=ref_max,
         ref_episodes=metadata.get("num_episodes_average_score", 100),
-        algorithm_name=f"the best {args.fraction:g} of {args.dataset}'s episodes by return",
-        description=f"{args.dataset}'s {n_kept} best episodes of {len(episodes)} by return (filtered BC's data).",
+        algorithm_name=f"{args.dataset}'s episodes, the best {args.fraction:g} by return"
+        + (" first" if args.keep_all else " only"),
+        description=f"{args.dataset}'s {n_kept} best episodes of {len(episodes)} by return (filtered BC's data)"
+        + (f", then the others: the first {first_rows} transitions are the best episodes'." if args.keep_all else "."),
         overwrite=args.overwrite,
         eval_env=EnvSpec.from_json(metadata["eval_env_spec"]) if metadata.get("eval_env_spec") else None,
-        extra_metadata={"source_dataset": args.dataset, "top_fraction": args.fraction},
+        extra_metadata={"source_dataset": args.dataset, "top_fraction": args.fraction, "top_rows": first_rows},
         code_permalink="experiments/policy_quality/top_episodes.py",
     )
 
@@ -78,10 +90,12 @@ def main() -> None:
             {
                 "dataset": args.out_id,
                 "path": str(path),
-                "episodes": int(n_kept),
+                "episodes": len(kept),
+                "best_episodes": int(n_kept),
+                "first_rows": first_rows,
                 "of": len(episodes),
                 "steps": int(sum(len(buffer.rewards) for buffer in buffers)),
-                "mean_score": normalised(returns[kept]),
+                "mean_score": normalised(returns[kept[:n_kept]]),
                 "source_mean_score": normalised(returns),
             }
         )
