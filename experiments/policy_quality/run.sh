@@ -1062,3 +1062,35 @@ QC0="${QC1%1.0}0.0"
 for d in pointmaze/medium-v0 hopper/medium-v0 pointmaze/umaze-v0; do
   screen --dataset "$d" --seed 0 --rules mode --name QC0 --kwargs "{$QC0}"
 done
+
+# --- thirty-ninth pass (stop 66): the best tenth of the episodes by return (filtered BC, the Decision Transformer
+# paper's %BC; top_episodes.py). BC with the defaults' actor on the best 10% (and hopper/medium's best 25%) of every
+# file, seeds 0-2 on the hopper files and halfcheetah/medium-replay, 0 elsewhere; POLA's defaults with the actor's
+# batches from the best 10% and the critics' from every transition (TOP10: --keep-all puts those episodes first,
+# --imitation-rows N is their transitions), the full file's dynamics fit copied in (the earlier blocks' screens wrote
+# it); POLA on the best episodes alone (RNW, seed 0). Screen rows: collection amd-top-episodes.
+RNWE='"compile_update": false, "use_state_products": false, "policy_kwargs": {"actor_activation_fn": "ReLU", "net_arch": {"pi": [256, 256], "qf": [128, 128]}}'
+for d in hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
+  n="${d//\//-}"; n="${n%-v0}"
+  "$PY" experiments/policy_quality/top_episodes.py --dataset "$d" --fraction 0.1 --out-id "top/$n-10-v0" --overwrite
+  case "$d" in hopper/* | halfcheetah/medium-replay-v0) seeds="0 1 2" ;; *) seeds=0 ;; esac
+  for s in $seeds; do
+    screen --dataset "top/$n-10-v0" --seed "$s" --rules mode --name BC --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0}"
+  done
+  case "$d" in pointmaze/*) continue ;; esac
+  rows=$("$PY" experiments/policy_quality/top_episodes.py --dataset "$d" --fraction 0.1 --keep-all --out-id "top/$n-all10-v0" --overwrite \
+    | "$PY" -c 'import json, sys; print(json.loads(sys.stdin.read())["first_rows"])')
+  mkdir -p "$OUT/top_$n-all10-v0" && cp "$OUT/${d//\//_}/dynamics.pt" "$OUT/top_$n-all10-v0/" 2>/dev/null || true
+  case "$d" in hopper/*) seeds="0 1 2" ;; *) seeds=0 ;; esac
+  for s in $seeds; do
+    screen --dataset "top/$n-all10-v0" --seed "$s" --rules mode --name TOP10 --imitation-rows "$rows" --kwargs "{$RNWE}"
+  done
+done
+# (this pass named hopper/medium's best 10% hopper/medium-top10-v0: the same episodes as top/hopper-medium-10-v0)
+for p in 10 25; do
+  "$PY" experiments/policy_quality/top_episodes.py --dataset hopper/medium-v0 --fraction "0.$p" --out-id "hopper/medium-top$p-v0" --overwrite
+  screen --dataset "hopper/medium-top$p-v0" --seed 0 --rules mode --name RNW --kwargs "{$RNWE}"
+done
+for s in 0 1 2; do
+  screen --dataset hopper/medium-top25-v0 --seed "$s" --rules mode --name BC --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0}"
+done
