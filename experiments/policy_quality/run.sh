@@ -1077,7 +1077,6 @@ for d in hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfchee
   for s in $seeds; do
     screen --dataset "top/$n-10-v0" --seed "$s" --rules mode --name BC --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0}"
   done
-  case "$d" in pointmaze/*) continue ;; esac
   rows=$("$PY" experiments/policy_quality/top_episodes.py --dataset "$d" --fraction 0.1 --keep-all --out-id "top/$n-all10-v0" --overwrite \
     | "$PY" -c 'import json, sys; print(json.loads(sys.stdin.read())["first_rows"])')
   mkdir -p "$OUT/top_$n-all10-v0" && cp "$OUT/${d//\//_}/dynamics.pt" "$OUT/top_$n-all10-v0/" 2>/dev/null || true
