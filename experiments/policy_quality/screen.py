@@ -17,8 +17,8 @@ network (screens only; loads again only with the flag). ``--eta-after FRACTION E
 until that fraction of ``--steps``, then at ``ETA`` (a step in the Q term's weight; screens only).
 ``--imitation-rows N`` draws the actor's batches (its ``L_d`` and its Q term's states) from the dataset's first N
 transitions, the critics' from all: with ``top_episodes.py --keep-all`` the actor learns from the best episodes only
-(screens only; the dynamics fit would see those rows only, so give the folder the full dataset's ``dynamics.pt``). The model is
-saved in ``OUT/<dataset>/<name>/seed<S>.zip`` (``OUT``: ``outputs/policy_quality``); a second call with the same
+(screens only; the dynamics fit would see those rows only, so give the folder the full dataset's ``dynamics.pt``).
+The model is saved in ``OUT/<dataset>/<name>/seed<S>.zip`` (``OUT``: ``outputs/policy_quality``); a second call with the same
 name and seed evaluates the saved model (e.g. under another rule). The dynamics model is fitted once per dataset and
 reused (``dynamics.pt``). One JSON line per run, appended to ``OUT/screen.jsonl``; ``--episodes`` above 10 adds the
 first 10 episodes' score (the protocol's).
