@@ -1065,7 +1065,7 @@ done
 
 # --- thirty-ninth pass (stop 66): the best tenth of the episodes by return (filtered BC, the Decision Transformer
 # paper's %BC; top_episodes.py). BC with the defaults' actor on the best 10% (and hopper/medium's best 25%) of every
-# file, seeds 0-2 on the hopper files and halfcheetah/medium-replay, 0 elsewhere; POLA's defaults with the actor's
+# file, seeds 0-7 on the hopper files, 0-2 on halfcheetah/medium-replay, 0 elsewhere; POLA's defaults with the actor's
 # batches from the best 10% and the critics' from every transition (TOP10: --keep-all puts those episodes first,
 # --imitation-rows N is their transitions), the full file's dynamics fit copied in (the earlier blocks' screens wrote
 # it); POLA on the best episodes alone (RNW, seed 0). Screen rows: collection amd-top-episodes.
@@ -1073,7 +1073,7 @@ RNWE='"compile_update": false, "use_state_products": false, "policy_kwargs": {"a
 for d in hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
   n="${d//\//-}"; n="${n%-v0}"
   "$PY" experiments/policy_quality/top_episodes.py --dataset "$d" --fraction 0.1 --out-id "top/$n-10-v0" --overwrite
-  case "$d" in hopper/* | halfcheetah/medium-replay-v0) seeds="0 1 2" ;; *) seeds=0 ;; esac
+  case "$d" in hopper/*) seeds="0 1 2 3 4 5 6 7" ;; halfcheetah/medium-replay-v0) seeds="0 1 2" ;; *) seeds=0 ;; esac
   for s in $seeds; do
     screen --dataset "top/$n-10-v0" --seed "$s" --rules mode --name BC --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0}"
   done
