@@ -25,6 +25,7 @@ from minari.data_collector import EpisodeBuffer
 
 from sb3_pola.collect.writer import datasets_root, write_dataset
 from sb3_pola.common.dataset_paths import resolve_dataset_path
+from sb3_pola.common.metrics import normalized_score
 
 
 def main() -> None:
@@ -82,8 +83,9 @@ def main() -> None:
         code_permalink="experiments/policy_quality/top_episodes.py",
     )
 
-    def normalised(values: np.ndarray) -> float:
-        return round(float(100 * (values.mean() - ref_min) / (ref_max - ref_min)), 1)
+    def normalised(values: np.ndarray) -> float | None:
+        score = normalized_score(values, ref_min, ref_max)
+        return None if score is None else round(score, 1)
 
     print(
         json.dumps(
