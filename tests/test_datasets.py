@@ -439,3 +439,23 @@ def test_returns_to_go_restart_at_terminations_and_truncations():
     data.dones = np.array([0.0, 0.0, 0.0, 0.0, 1.0], dtype=np.float32)
     assert data.episode_ends().tolist() == [False, False, True, False, True]
     np.testing.assert_allclose(data.returns_to_go(0.5), [1 + 0.5 * 2 + 0.25 * 4, 2 + 0.5 * 4, 4, 1.5, 1.0])
+
+
+def _three_episodes():
+    """Episodes of lengths 2, 3, 1 with returns 3, 1.5 and 5 (chained observations, truncations between them)."""
+    data = synthetic_dataset(6, 1, 1)
+    data.observations = np.array([[0.0], [1.0], [10.0], [11.0], [12.0], [20.0]], dtype=np.float32)
+    data.next_observations = data.observations + 1.0
+    data.rewards = np.array([1.0, 2.0, 0.5, 0.5, 0.5, 5.0], dtype=np.float32)
+    data.dones = np.zeros(6, dtype=np.float32)
+    return data
+
+
+def test_best_episode_rows_keep_the_best_episodes_whole_in_the_files_order():
+    data = _three_episodes()
+    assert data.best_episode_rows(0.3).tolist() == [5]  # ceil(0.9) = 1 episode: the return-5 one
+    assert data.best_episode_rows(0.5).tolist() == [0, 1, 5]  # 2 episodes, back in the file's order
+    assert data.best_episode_rows(1.0).tolist() == [0, 1, 2, 3, 4, 5]
+    assert data.best_episode_rows(0.01).tolist() == [5]  # at least one episode
+    with pytest.raises(ValueError, match="fraction"):
+        data.best_episode_rows(0.0)

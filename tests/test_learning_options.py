@@ -486,3 +486,35 @@ def test_q_term_confidence_share_is_logged_in_training(pendulum_path):
     model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(n_critics=3, q_term_confidence=1.0))
     model.learn(4)
     assert 0.0 <= model.logger.name_to_value["train/q_term_share"] <= 1.0
+
+
+# ---------------------------------------------------------------- bc_top_fraction (filtered BC for the actor)
+def test_bc_top_fraction_draws_the_actors_batches_from_the_best_episodes(pendulum_path, tmp_path):
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(bc_top_fraction=0.3))
+    data = model.offline_data
+    best = set(data.best_episode_rows(0.3).tolist())
+    assert 0 < len(best) < len(data)  # the fixture's best of three episodes
+    seen = {"actor": set(), "critic": 0}
+    update = model._update
+
+    def spy(batch, returns, actor_batch, next_data):
+        observations = model._setup_offline_data().observations
+        for row in actor_batch[0]:  # the rows of the actor's observations (the pendulum's states are distinct)
+            seen["actor"].add(int(th.nonzero((observations == row).all(dim=1))[0, 0]))
+        seen["critic"] += len(batch.observations)
+        return update(batch, returns, actor_batch, next_data)
+
+    model._update = spy
+    model.learn(5)
+    assert seen["actor"] and seen["actor"] <= best
+    assert seen["critic"] == 5 * model.batch_size  # the critics keep the uniform batch over every transition
+    model.save(tmp_path / "m")  # the rows are the data's: rebuilt, not saved
+    loaded = POLA.load(tmp_path / "m", dataset=pendulum_path)
+    loaded.learn(1, reset_num_timesteps=False)
+    assert set(loaded._imitation_rows.tolist()) == best
+
+
+def test_bc_top_fraction_must_be_a_share_of_the_episodes(pendulum_path):
+    for value in (0.0, 1.5):
+        with pytest.raises(ValueError, match="bc_top_fraction"):
+            POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(bc_top_fraction=value))

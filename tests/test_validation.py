@@ -54,6 +54,7 @@ BAD_ARGUMENTS: list[tuple[dict[str, Any], str]] = [
         "q_term_confidence needs n_critics >= 2",
     ),
     ({"critic_layer_norm": "yes"}, "critic_layer_norm must be one of False, True"),
+    ({"bc_top_fraction": 0.0}, "bc_top_fraction must be None or a number in"),
     ({"max_grad_norm": 0.0}, "max_grad_norm must be None or a number > 0.0"),
     ({"ema_decay": 1.5}, "ema_decay must be a number in [0.0, 1.0]"),
     ({"ema_update_freq": 0}, "ema_update_freq must be an int >= 1"),

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import os
 import pathlib
 from collections.abc import Callable, Iterable, Sequence
@@ -147,6 +148,21 @@ class OfflineDataset:
             ends[:-1] |= np.any(self.next_observations[:-1] != self.observations[1:], axis=1)
             ends[-1] = True
         return ends
+
+    def best_episode_rows(self, fraction: float) -> np.ndarray:
+        """``[M]`` int64 rows of the best ``fraction`` of the episodes by undiscounted return (at least one episode;
+        ties keep the file's order), in the file's order: filtered BC's data (the Decision Transformer paper's %BC).
+
+        :param fraction: share of the episodes kept, in (0, 1]
+        """
+        if not 0 < fraction <= 1:
+            raise ValueError(f"fraction must be in (0, 1], got {fraction}")
+        ends = np.flatnonzero(self.episode_ends())
+        starts = np.concatenate([[0], ends[:-1] + 1])
+        returns = np.add.reduceat(self.rewards.astype(np.float64), starts) if len(self) else np.zeros(0)
+        n_kept = max(1, math.ceil(fraction * len(starts)))
+        kept = np.sort(np.argsort(-returns, kind="stable")[:n_kept])  # best first, then back in the file's order
+        return np.concatenate([np.arange(starts[i], ends[i] + 1) for i in kept]).astype(np.int64)
 
     def goal_switches(self) -> np.ndarray:
         """``[N]`` bool, True where the ``desired_goal`` of a goal-conditioned dataset changes between a transition's

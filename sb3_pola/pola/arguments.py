@@ -77,6 +77,7 @@ def check_pola_arguments(
     bc_learning_rate: float | Schedule | None,
     bc_weight_temp: float | None,
     bc_max_weight: float,
+    bc_top_fraction: float | None,
     backprop_through_model: bool,
     model_td_weight: float,
     model_conservatism: float,
@@ -147,6 +148,7 @@ def check_pola_arguments(
         check_float_or_schedule("bc_learning_rate", bc_learning_rate, low=0.0, low_open=True)
     check_float("bc_weight_temp", bc_weight_temp, low=0.0, optional=True)
     check_float("bc_max_weight", bc_max_weight, low=0.0, low_open=True)
+    check_float("bc_top_fraction", bc_top_fraction, low=0.0, high=1.0, low_open=True, optional=True)
     if lookahead_trust_margin is not None and lookahead_target != "q":
         raise HyperparameterError("lookahead_trust_margin judges Q at the predicted states; it needs lookahead_target='q'")
     if lookahead_actions == "ema" and not backprop_through_model:

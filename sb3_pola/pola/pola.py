@@ -203,6 +203,10 @@ class POLA(POLAObjectives, POLAData):
         ``eta``. ``None`` (default): the plain mean (the paper); ``0``: the same weights, all 1. Costs one more chain
         of the EMA actor and one critic call a step
     :param bc_max_weight: upper clip of the advantage weights (relative to their mean of 1). Default ``20``
+    :param bc_top_fraction: the actor's batches (its ``L_d`` and its Q term's states) come from this fraction of the
+        episodes, the best by return (filtered BC, the Decision Transformer paper's %BC), the critics' from every
+        transition. For dense rewards: a maze's collector switches goals, so its episodes' returns do not rank how a
+        policy holds one. ``None``: every episode (the paper; default)
     :param max_grad_norm: gradient-norm clipping of actor and critic (``None`` disables it)
     :param ema_decay: decay of the EMA actor used for targets and ``predict``
     :param ema_update_freq: gradient steps between EMA updates
@@ -285,6 +289,7 @@ class POLA(POLAObjectives, POLAData):
         bc_learning_rate: float | Schedule | None = None,
         bc_weight_temp: float | None = None,
         bc_max_weight: float = 20.0,
+        bc_top_fraction: float | None = None,
         max_grad_norm: float | None = 1.0,
         ema_decay: float = 0.995,
         ema_update_freq: int = 5,
@@ -306,7 +311,7 @@ class POLA(POLAObjectives, POLAData):
         check_pola_arguments(**{name: arguments[name] for name in inspect.signature(check_pola_arguments).parameters})
         # read while the base class loads the dataset (_prepare_offline_data), so set before it
         self.goal_switches = goal_switches
-        self.hindsight_goals = hindsight_goals
+        self.hindsight_goals, self.bc_top_fraction = hindsight_goals, bc_top_fraction
         self._init_data_state()
         super().__init__(
             policy,
@@ -419,7 +424,7 @@ class POLA(POLAObjectives, POLAData):
         # rebuilt by _setup_model and before training, or read from the data again
         rebuilt = """actor critic critic_target _termination_fn _gamma_powers _lookahead_powers _eta_value _bc_temp_value
             _sample_actor _sample_lookahead _sample_target _input_gradients _critic_loss_fn _data_returns
-            _next_data_mask _goal_mask _n_imitation_rows _bc_loss_fn _q_term_fn _fallback_loss_fn _bc_lr
+            _next_data_mask _goal_mask _n_imitation_rows _imitation_rows _bc_loss_fn _q_term_fn _fallback_loss_fn _bc_lr
             eta_schedule critic_lr_schedule bc_lr_schedule"""
         return [*super()._excluded_save_params(), *rebuilt.split()]
 
@@ -449,10 +454,8 @@ class POLA(POLAObjectives, POLAData):
             indices = buffer.sample_indices(batch_size)
             returns = None if self._data_returns is None else self._data_returns[indices]
             next_data = None if self._next_data_mask is None else self._next_data(indices)
-            actor_batch = None
-            if self._n_imitation_rows is not None:  # the hindsight copies train the critic, not the actor
-                actor_indices = buffer.sample_indices(batch_size, self._n_imitation_rows)
-                actor_batch = (buffer.observations[actor_indices], buffer.actions[actor_indices])
+            rows = self._actor_indices(buffer, batch_size)  # the actor's own rows: hindsight copies, bc_top_fraction
+            actor_batch = None if rows is None else (buffer.observations[rows], buffer.actions[rows])
             self._accumulate_train_stats(self._update(buffer._get_samples(indices), returns, actor_batch, next_data))
             self._n_updates += 1
 

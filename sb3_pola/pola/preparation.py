@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import torch as th
 
+from sb3_pola.common.buffers import OfflineReplayBuffer
 from sb3_pola.common.dataset_paths import DatasetError, resolve_dataset_path
 from sb3_pola.common.datasets import OfflineDataset, make_env
 from sb3_pola.common.dict_obs import key_slice
@@ -52,12 +53,14 @@ class POLAData(OfflineAlgorithm):
     lookahead_fixed_goal: bool
     goal_switches: str | None
     hindsight_goals: bool
+    bc_top_fraction: float | None
     dynamics_fit_kwargs: dict[str, Any]
     dynamics_cache: bool
 
     def _init_data_state(self) -> None:
         """What the preparation derives from the data, before it is loaded (by ``POLA.__init__``)."""
         self._n_imitation_rows: int | None = None  # hindsight_goals: the actor's batches come from the first rows
+        self._imitation_rows: th.Tensor | None = None  # bc_top_fraction: [M] the rows the actor's batches come from
         # "returns": the dataset's discounted return-to-go of every transition, [N], set once the data are loaded
         self._data_returns: th.Tensor | None = None
         self._critic_init_done = False  # critic_init_value applied (once, before the first update)
@@ -75,7 +78,7 @@ class POLAData(OfflineAlgorithm):
         hindsight = self.hindsight_goals and space is not None and "desired_goal" in space.spaces
         switches = self.goal_switches is not None and data.goal_switches().any()
         if not switches and not hindsight:
-            return data
+            return self._with_imitation_rows(data)
         reward_fn = None
         if hindsight or self.goal_switches == "relabel":
             env = make_env(data)
@@ -87,6 +90,7 @@ class POLAData(OfflineAlgorithm):
             if self.goal_switches == "relabel" and reward_fn is None:
                 raise ValueError(f"goal_switches='relabel' needs an env with compute_reward (GoalEnv); {data.env_id} has none")
             data = data.with_goal_switches(self.goal_switches, reward_fn)  # type: ignore[arg-type]
+        data = self._with_imitation_rows(data)
         if hindsight:
             if reward_fn is None:
                 warnings.warn(f"hindsight_goals needs an env with compute_reward (GoalEnv); {data.env_id} has none: no copies")
@@ -94,6 +98,23 @@ class POLAData(OfflineAlgorithm):
             self._n_imitation_rows = len(data)  # the copies come after: the critic's rows, not the actor's
             data = data.with_hindsight_goals(reward_fn, seed=0 if self.seed is None else self.seed)
         return data
+
+    def _with_imitation_rows(self, data: OfflineDataset) -> OfflineDataset:
+        """``data``, with the rows of its best episodes noted for the actor (``bc_top_fraction``)."""
+        if self.bc_top_fraction is not None:
+            self._imitation_rows = th.as_tensor(data.best_episode_rows(self.bc_top_fraction))
+        return data
+
+    def _actor_indices(self, buffer: OfflineReplayBuffer, batch_size: int) -> th.Tensor | None:
+        """``[B]`` rows of the actor's batch where they are not the critics' (``bc_top_fraction``: the best episodes';
+        ``hindsight_goals``: the data's, not the copies'); ``None``: the critics' batch."""
+        if self._imitation_rows is not None:
+            if self._imitation_rows.device != buffer.device:
+                self._imitation_rows = self._imitation_rows.to(buffer.device)
+            return self._imitation_rows[buffer.sample_indices(batch_size, len(self._imitation_rows))]
+        if self._n_imitation_rows is not None:
+            return buffer.sample_indices(batch_size, self._n_imitation_rows)
+        return None
 
     # ------------------------------------------------------------------ dynamics model
     def _before_training(self, progress_bar: bool = False) -> None:
