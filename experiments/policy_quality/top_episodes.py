@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 
 import minari
 import numpy as np
@@ -25,6 +24,7 @@ from minari.data_collector import EpisodeBuffer
 
 from sb3_pola.collect.writer import datasets_root, write_dataset
 from sb3_pola.common.dataset_paths import resolve_dataset_path
+from sb3_pola.common.datasets import best_episodes
 from sb3_pola.common.metrics import normalized_score
 
 
@@ -47,8 +47,8 @@ def main() -> None:
     source = minari.MinariDataset(resolve_dataset_path(args.dataset))  # Minari's folder or the package's
     episodes = list(source.iterate_episodes())
     returns = np.array([float(np.sum(episode.rewards)) for episode in episodes])
-    n_kept = max(1, math.ceil(args.fraction * len(episodes)))
-    kept = np.sort(np.argsort(-returns, kind="stable")[:n_kept])  # best first, then back in the file's order
+    kept = best_episodes(returns, args.fraction)
+    n_kept = len(kept)
     first_rows = int(sum(len(episodes[i].rewards) for i in kept))
     if args.keep_all:
         kept = np.concatenate([kept, np.setdiff1d(np.arange(len(episodes)), kept)])

@@ -75,6 +75,19 @@ def default_cache_dir() -> pathlib.Path:
 GoalRewardFn: TypeAlias = "Callable[[np.ndarray, np.ndarray], np.ndarray]"
 
 
+def best_episodes(returns: np.ndarray, fraction: float) -> np.ndarray:
+    """Indices of the best ``fraction`` of the episodes by return, in the file's order (at least one; ties keep the
+    file's order): filtered BC's episodes (the Decision Transformer paper's %BC).
+
+    :param returns: ``[n_episodes]`` each episode's return
+    :param fraction: share of the episodes kept, in (0, 1]
+    """
+    if not 0 < fraction <= 1:
+        raise ValueError(f"fraction must be in (0, 1], got {fraction}")
+    n_kept = max(1, math.ceil(fraction * len(returns)))
+    return np.sort(np.argsort(-np.asarray(returns), kind="stable")[:n_kept])  # best first, then the file's order
+
+
 @dataclass
 class OfflineDataset:
     """Flat transitions of an offline dataset.
@@ -155,13 +168,10 @@ class OfflineDataset:
 
         :param fraction: share of the episodes kept, in (0, 1]
         """
-        if not 0 < fraction <= 1:
-            raise ValueError(f"fraction must be in (0, 1], got {fraction}")
         ends = np.flatnonzero(self.episode_ends())
         starts = np.concatenate([[0], ends[:-1] + 1])
         returns = np.add.reduceat(self.rewards.astype(np.float64), starts) if len(self) else np.zeros(0)
-        n_kept = max(1, math.ceil(fraction * len(starts)))
-        kept = np.sort(np.argsort(-returns, kind="stable")[:n_kept])  # best first, then back in the file's order
+        kept = best_episodes(returns, fraction)
         return np.concatenate([np.arange(starts[i], ends[i] + 1) for i in kept]).astype(np.int64)
 
     def goal_switches(self) -> np.ndarray:
