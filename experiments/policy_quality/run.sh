@@ -1093,3 +1093,32 @@ done
 for s in 0 1 2; do
   screen --dataset hopper/medium-top25-v0 --seed "$s" --rules mode --name BC --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0}"
 done
+# --- fortieth pass (stop 67): filtered BC on the seeds the thirty-ninth pass left out (every file at 3 seeds); the
+# actor on the best tenth together with q_term_confidence = 1 (TOPQ: the thirty-ninth pass's TOP10 screen plus the
+# option; TQ: the same through the package's new option bc_top_fraction, on the file as it is); a cosine decay of
+# BC's rate (BCcos, stopped after three runs). Screen rows: collection amd-top-confident.
+for d in halfcheetah/medium-v0 pointmaze/umaze-v0 pointmaze/medium-v0; do
+  n="${d//\//-}"; n="${n%-v0}"
+  for s in 1 2; do
+    screen --dataset "top/$n-10-v0" --seed "$s" --rules mode --name BC --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0}"
+  done
+done
+TQ="$RNWE, \"q_term_confidence\": 1.0"
+for s in 0 1 2; do
+  screen --dataset top/hopper-medium-all10-v0 --seed "$s" --rules mode --name TOPQ --imitation-rows 13579 --kwargs "{$TQ}"
+  screen --dataset top/hopper-medium-replay-all10-v0 --seed "$s" --rules mode --name TOPQ --imitation-rows 18775 --kwargs "{$TQ}"
+done
+screen --dataset top/halfcheetah-medium-all10-v0 --seed 0 --rules mode --name TOPQ --imitation-rows 11000 --kwargs "{$TQ}"
+screen --dataset top/halfcheetah-medium-replay-all10-v0 --seed 0 --rules mode --name TOPQ --imitation-rows 5999 --kwargs "{$TQ}"
+for s in 1 2; do
+  for d in halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+    screen --dataset "$d" --seed "$s" --rules mode --name TQ --kwargs "{$TQ, \"bc_top_fraction\": 0.1}"
+  done
+done
+for d in hopper/medium-v0 hopper/medium-replay-v0; do
+  screen --dataset "$d" --seed 0 --rules mode --name TQ --kwargs "{$TQ, \"bc_top_fraction\": 0.1}"
+done
+screen --dataset pointmaze/umaze-v0 --seed 0 --rules mode --name BCcos --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0, \"lr_cos\": 0.001}"
+for s in 0 1; do
+  screen --dataset pointmaze/medium-v0 --seed "$s" --rules mode --name BCcos --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0, \"lr_cos\": 0.001}"
+done
