@@ -78,7 +78,8 @@ class POLAData(OfflineAlgorithm):
         hindsight = self.hindsight_goals and space is not None and "desired_goal" in space.spaces
         switches = self.goal_switches is not None and data.goal_switches().any()
         if not switches and not hindsight:
-            return self._with_imitation_rows(data)
+            self._note_imitation_rows(data)
+            return data
         reward_fn = None
         if hindsight or self.goal_switches == "relabel":
             env = make_env(data)
@@ -90,7 +91,7 @@ class POLAData(OfflineAlgorithm):
             if self.goal_switches == "relabel" and reward_fn is None:
                 raise ValueError(f"goal_switches='relabel' needs an env with compute_reward (GoalEnv); {data.env_id} has none")
             data = data.with_goal_switches(self.goal_switches, reward_fn)  # type: ignore[arg-type]
-        data = self._with_imitation_rows(data)
+        self._note_imitation_rows(data)  # before the copies: the actor's rows are the data's
         if hindsight:
             if reward_fn is None:
                 warnings.warn(f"hindsight_goals needs an env with compute_reward (GoalEnv); {data.env_id} has none: no copies")
@@ -99,11 +100,10 @@ class POLAData(OfflineAlgorithm):
             data = data.with_hindsight_goals(reward_fn, seed=0 if self.seed is None else self.seed)
         return data
 
-    def _with_imitation_rows(self, data: OfflineDataset) -> OfflineDataset:
-        """``data``, with the rows of its best episodes noted for the actor (``bc_top_fraction``)."""
+    def _note_imitation_rows(self, data: OfflineDataset) -> None:
+        """Note the rows of the data's best episodes, the actor's (``bc_top_fraction``)."""
         if self.bc_top_fraction is not None:
             self._imitation_rows = th.as_tensor(data.best_episode_rows(self.bc_top_fraction))
-        return data
 
     def _actor_indices(self, buffer: OfflineReplayBuffer, batch_size: int) -> th.Tensor | None:
         """``[B]`` rows of the actor's batch where they are not the critics' (``bc_top_fraction``: the best episodes';
