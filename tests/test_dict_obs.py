@@ -29,6 +29,13 @@ def goal_model(goal_dataset: str) -> POLA:
     return POLA("MlpPolicy", dataset=goal_dataset, **light_kwargs()).learn(4)
 
 
+def test_dense_reward_options_stay_off_with_a_desired_goal(goal_model: POLA) -> None:
+    """``"auto"`` (the default) of ``q_term_confidence`` and ``bc_top_fraction`` is off on goal-conditioned data."""
+    assert (goal_model.q_term_confidence, goal_model.bc_top_fraction) == ("auto", "auto")
+    assert goal_model._dense_option("q_term_confidence") is None and goal_model._dense_option("bc_top_fraction") is None
+    assert goal_model._imitation_rows is None and "train/q_term_share" not in goal_model.logger.name_to_value
+
+
 def test_dataset_is_flattened_in_the_spaces_key_order(goal_dataset: str) -> None:
     data = load_offline_dataset(goal_dataset, use_cache=False)
     assert isinstance(data.dict_observation_space, gym.spaces.Dict)

@@ -363,6 +363,8 @@ def test_defaults_depart_from_the_paper_form_and_it_stays_reachable(pendulum_pat
         "goal_switches": None,
         "hindsight_goals": False,
         "use_state_products": True,
+        "q_term_confidence": None,
+        "bc_top_fraction": None,
     }
     # the Q term at the paper's strength, bounded by LayerNorm critics (#23; #12's weakened form stays an option)
     shared = {"lookahead_normalization", "q_scale_floor"}
@@ -512,6 +514,23 @@ def test_bc_top_fraction_draws_the_actors_batches_from_the_best_episodes(pendulu
     loaded = POLA.load(tmp_path / "m", dataset=pendulum_path)
     loaded.learn(1, reset_num_timesteps=False)
     assert set(loaded._imitation_rows.tolist()) == best
+
+
+def test_dense_reward_options_are_on_by_default_without_a_goal(pendulum_path):
+    """``q_term_confidence`` and ``bc_top_fraction`` default to ``"auto"``: on data without a ``desired_goal`` their
+    dense-reward values (fortieth pass), the gate's share logged; off with one critic, or when given ``None``."""
+    model = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs())
+    assert (model.q_term_confidence, model.bc_top_fraction) == ("auto", "auto")
+    assert model._dense_option("q_term_confidence") == 1.0 and model._dense_option("bc_top_fraction") == 0.1
+    assert set(model._imitation_rows.tolist()) == set(model.offline_data.best_episode_rows(0.1).tolist())
+    model.learn(4)
+    assert 0.0 <= model.logger.name_to_value["train/q_term_share"] <= 1.0
+    single = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(n_critics=1, top_k=1, critic_diversity=0.0))
+    assert single._dense_option("q_term_confidence") is None  # no members to agree
+    paper = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(q_term_confidence=None, bc_top_fraction=None))
+    assert paper._dense_option("q_term_confidence") is None and paper._imitation_rows is None
+    paper.learn(4)
+    assert "train/q_term_share" not in paper.logger.name_to_value
 
 
 def test_bc_top_fraction_must_be_a_share_of_the_episodes(pendulum_path):

@@ -89,6 +89,21 @@ def ref_next_data_actions(data, indices: th.Tensor) -> tuple[th.Tensor, th.Tenso
     return th.as_tensor(np.stack(next_actions), dtype=th.float32), th.tensor(goes_on)
 
 
+def ref_confidence(model, critic, obs, first_action, actions):
+    """``q_term_confidence``'s mask ``[B]``: a state's terms count where the members agree a_t beats the data's."""
+    confidence = model._dense_option("q_term_confidence")  # "auto": as it applies to the data
+    if confidence is None:
+        return None
+    with th.no_grad():
+        gain = ref_q(critic, obs, first_action) - ref_q(critic, obs, actions)  # [N, B]
+        mean = gain.mean(dim=0)
+        std = ((gain - mean).pow(2).sum(dim=0) / (gain.shape[0] - 1)).sqrt()
+        confident = (mean > confidence * std).float()
+    if model.q_term_confidence != "auto":  # the gate's own cases: states of both kinds in the batch
+        assert 0 < float(confident.sum()) < obs.shape[0]
+    return confident
+
+
 def reference_step(model, policy, batch, next_data=None) -> dict[str, object]:
     """One POLA update written plainly from the paper: critic TD step, actor ``L_d + eta L_q``, EMA and targets."""
     obs, actions, next_obs = batch.observations, batch.actions, batch.next_observations
@@ -175,13 +190,8 @@ def reference_step(model, policy, batch, next_data=None) -> dict[str, object]:
         if model.lookahead_trust_rule == "bellman":  # or the value the rollout implies for s_t
             judged = [sum(rewards[:i]) + model.gamma**i * judged[i] for i in range(len(judged))]
         terms = terms[:1] + [(q_k, a * (judged[i] <= bound).float()) for i, (q_k, a) in enumerate(terms) if i > 0]
-    if model.q_term_confidence is not None:  # a state's terms count where the members agree a_t beats the data's
-        with th.no_grad():
-            gain = ref_q(critic, obs, first_action) - ref_q(critic, obs, actions)  # [N, B]
-            mean = gain.mean(dim=0)
-            std = ((gain - mean).pow(2).sum(dim=0) / (gain.shape[0] - 1)).sqrt()
-            confident = (mean > model.q_term_confidence * std).float()
-        assert 0 < float(confident.sum()) < obs.shape[0]  # states of both kinds in the batch
+    confident = ref_confidence(model, critic, obs, first_action, actions)
+    if confident is not None:
         terms = [(q_k, a * confident) for q_k, a in terms]
     scale = terms[0][0].abs().mean().detach().clamp_min(max(model.q_scale_floor_value or 0.0, 1e-6))
     # eq. 3's gamma^i, times lookahead_weight at the predicted states

@@ -126,8 +126,8 @@ def test_file_from_before_an_argument_loads_with_its_default(saved_model, tmp_pa
     """A file saved before an argument existed has no key for it: loading runs ``__init__`` first, so the model gets
     the argument's default (no ``getattr`` fallback needed where the argument is read) and trains."""
     _, path = saved_model
-    newer = {"q_term_confidence": None, "lookahead_trust_margin": None, "lookahead_trust_rule": "value"}
-    newer |= {"bc_learning_rate": None, "dynamics_cache": True, "bc_top_fraction": None}
+    newer = {"q_term_confidence": "auto", "lookahead_trust_margin": None, "lookahead_trust_rule": "value"}
+    newer |= {"bc_learning_rate": None, "dynamics_cache": True, "bc_top_fraction": "auto"}
     old_path = tmp_path / "old.zip"
     with zipfile.ZipFile(path) as source, zipfile.ZipFile(old_path, "w") as target:
         for item in source.infolist():

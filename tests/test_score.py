@@ -271,9 +271,10 @@ def test_eval_rule_during_training(score_data: pathlib.Path, tmp_path: pathlib.P
     # #23's eta 3.94 and lookahead_weight 1/16, which PAPER_FORM now names; bd27d4080b, 9f44ccef5c before #23's
     # constant learning rate; 888d5085a7, 414bf21ef7 before #23's relabelled goal switches; 7ab4808cde, 1275fa6ebf
     # before #23's hindsight goals; cedcb37962, ceb7361daf before #23's actor on the raw state and the cpu preset's
-    # 2 x 256 actor), so that a folder of the old defaults is not resumed under the new ones
+    # 2 x 256 actor; 22f4ffa045, 0c8cbe3377 before #23's "auto" q_term_confidence and bc_top_fraction), so that a
+    # folder of the old defaults is not resumed under the new ones
     presets = grid_variants.PRESETS
-    assert presets["cpu"].signature() == "22f4ffa045" and presets["paper"].signature() == "0c8cbe3377"
+    assert presets["cpu"].signature() == "a9fbd00aaf" and presets["paper"].signature() == "3525bdef14"
     base, sampled = tmp_path / "ema", tmp_path / "stochastic"
     assert run(score_data, base, "--variants", "T1", "--seeds", "0") == 0
     assert run(score_data, sampled, "--variants", "T1", "--seeds", "0", "--eval-rule", "stochastic") == 0

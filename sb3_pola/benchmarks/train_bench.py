@@ -51,12 +51,6 @@ def configurations(quick: bool, compiled: bool = False) -> list[dict[str, Any]]:
             "kwargs": DEFAULTS_FORM,
             "policy_kwargs": {"fallback_confidence": 1.0},
         },
-        # bc_top_fraction with q_term_confidence (#23 fortieth pass): the gate's critic pass at the data's actions
-        {
-            "name": "defaults hopper, best tenth and gate",
-            "task": "hopper",
-            "kwargs": {**DEFAULTS_FORM, "bc_top_fraction": 0.1, "q_term_confidence": 1.0},
-        },
         {"name": "paper halfcheetah", "task": "halfcheetah", "kwargs": {}, "flops": not quick},
         {"name": "T=0", "task": "hopper", "kwargs": {"rollout_length": 0}},
         {"name": "T=1", "task": "hopper", "kwargs": {"rollout_length": 1}},

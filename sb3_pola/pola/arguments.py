@@ -19,6 +19,8 @@ LOOKAHEAD_ACTIONS = ("actor", "ema")
 ETA_GATES = (None, "critic_maturity")
 GOAL_SWITCHES = (None, "terminal", "relabel")
 CRITIC_DIVERSITY_INPUTS = ("actions", "states_and_actions")
+# the "auto" values of the options for dense rewards (#23 fortieth pass): on where the data have no desired_goal
+DENSE_REWARD_OPTIONS: dict[str, float] = {"q_term_confidence": 1.0, "bc_top_fraction": 0.1}
 # the paper's form (eq. 3/4 as written, Diffusion-QL's divisor, no ensemble-similarity term, the actor's gradient
 # through the model, the DDPM noise target of eq. 6, Diffusion-QL's learning rate 3e-4, the actor on the state's
 # pairwise products of section V, with the critics' Mish): POLA(..., **PAPER_FORM);
@@ -40,10 +42,20 @@ PAPER_FORM: dict[str, Any] = {
     "goal_switches": None,
     "hindsight_goals": False,
     "use_state_products": True,
+    "q_term_confidence": None,
+    "bc_top_fraction": None,
 }
 
 
 # ------------------------------------------------------------------ argument checks (issue #25)
+def check_auto_float(name: str, value: Any, **bounds: Any) -> None:
+    """An option of ``DENSE_REWARD_OPTIONS``: ``"auto"``, ``None`` or a number within ``bounds``."""
+    if isinstance(value, str):
+        check_choice(name, value, ("auto",))
+    else:
+        check_float(name, value, optional=True, **bounds)
+
+
 def check_pola_arguments(
     *,
     n_critics: int,
@@ -66,7 +78,7 @@ def check_pola_arguments(
     lookahead_trust_rule: str,
     lcb_coef: float | None,
     critic_bc_coef: float,
-    q_term_confidence: float | None,
+    q_term_confidence: float | str | None,
     critic_layer_norm: bool,
     eta_gate: str | None,
     eta_gate_fraction: float,
@@ -77,7 +89,7 @@ def check_pola_arguments(
     bc_learning_rate: float | Schedule | None,
     bc_weight_temp: float | None,
     bc_max_weight: float,
-    bc_top_fraction: float | None,
+    bc_top_fraction: float | str | None,
     backprop_through_model: bool,
     model_td_weight: float,
     model_conservatism: float,
@@ -132,8 +144,8 @@ def check_pola_arguments(
     if lcb_coef is not None and n_critics < 2:
         raise HyperparameterError(f"lcb_coef needs n_critics >= 2, got n_critics={n_critics}")
     check_float("critic_bc_coef", critic_bc_coef, low=0.0)
-    check_float("q_term_confidence", q_term_confidence, optional=True)
-    if q_term_confidence is not None and n_critics < 2:
+    check_auto_float("q_term_confidence", q_term_confidence)  # "auto": on with two or more critics
+    if q_term_confidence not in (None, "auto") and n_critics < 2:
         raise HyperparameterError(f"q_term_confidence needs n_critics >= 2, got n_critics={n_critics}")
     check_choice("critic_layer_norm", critic_layer_norm, (False, True))
     check_choice("eta_gate", eta_gate, ETA_GATES)
@@ -148,7 +160,7 @@ def check_pola_arguments(
         check_float_or_schedule("bc_learning_rate", bc_learning_rate, low=0.0, low_open=True)
     check_float("bc_weight_temp", bc_weight_temp, low=0.0, optional=True)
     check_float("bc_max_weight", bc_max_weight, low=0.0, low_open=True)
-    check_float("bc_top_fraction", bc_top_fraction, low=0.0, high=1.0, low_open=True, optional=True)
+    check_auto_float("bc_top_fraction", bc_top_fraction, low=0.0, high=1.0, low_open=True)
     if lookahead_trust_margin is not None and lookahead_target != "q":
         raise HyperparameterError("lookahead_trust_margin judges Q at the predicted states; it needs lookahead_target='q'")
     if lookahead_actions == "ema" and not backprop_through_model:

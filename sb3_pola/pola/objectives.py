@@ -58,7 +58,8 @@ class POLAObjectives(OfflineAlgorithm):
     lookahead_uncertainty_cutoff: float | None
     lookahead_trust_margin: float | None
     lookahead_trust_rule: str
-    q_term_confidence: float | None
+    q_term_confidence: float | str | None
+    _dense_option: Callable[[str], float | None]  # POLAData's: an option's value as it applies ("auto")
     q_scale_floor_value: float | None
     _goal_mask: th.Tensor | None
     _termination_fn: TerminationFn | None
@@ -287,7 +288,7 @@ class POLAObjectives(OfflineAlgorithm):
                 trusted = (judged <= bound).float()  # [T, B]
                 q_all = (alive_mask * q_pess).mean(dim=1)  # [T+1]: the diagnostics keep every alive term
             counted = alive_mask * th.cat([th.ones_like(trusted[:1]), trusted])  # [T+1, B]
-        confidence = self.q_term_confidence
+        confidence = self._dense_option("q_term_confidence")
         confident = None
         if confidence is not None and data_actions is not None:
             with th.no_grad():  # d_j = Q_j(s_t, a_t) - Q_j(s_t, a_data): the state's terms count where mean > k std

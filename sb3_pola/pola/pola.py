@@ -68,7 +68,8 @@ class POLA(POLAObjectives, POLAData):
     ``critic_layer_norm=True``, ``critic_diversity=1``, ``backprop_through_model=False``, ``prediction_type="sample"``,
     ``use_state_products=False``, a constant ``learning_rate`` of 1e-3, ``target_q_floor="returns"``,
     ``critic_init_value="returns"``, ``eta_gate="critic_maturity"``, ``lookahead_fixed_goal=True``,
-    ``goal_switches="relabel"`` and ``hindsight_goals=True``; the dynamics model fits with beta-NLL and
+    ``goal_switches="relabel"``, ``hindsight_goals=True``, ``q_term_confidence="auto"`` and
+    ``bc_top_fraction="auto"`` (on without a ``desired_goal``); the dynamics model fits with beta-NLL and
     ``predict(deterministic=True)`` returns the mode of 16 chain samples drawn with the observation's own noise
     (:class:`~sb3_pola.pola.policies.POLAPolicy`). The paper's form is ``POLA(..., **PAPER_FORM)``.
 
@@ -151,8 +152,9 @@ class POLA(POLAObjectives, POLAData):
         only where the critic's members agree the actor's action beats the data's, ``mean_j d_j > k std_j d_j`` with
         ``d_j = Q_j(s, a_t) - Q_j(s, a_data)`` (no gradient); elsewhere the actor only imitates (the policy option
         ``fallback_confidence``'s test, made while training one actor). For dense rewards: on sparse ones the members
-        rarely agree. Logged as ``train/q_term_share``. ``None``: every state counts (the paper; default). Needs
-        ``n_critics >= 2``
+        rarely agree. Logged as ``train/q_term_share``. ``"auto"`` (default): ``1.0`` where the data have no
+        ``desired_goal`` and ``n_critics >= 2``, else ``None``. ``None``: every state counts (the paper). A number
+        needs ``n_critics >= 2``
     :param critic_layer_norm: LayerNorm in the critics' hidden layers (ReBRAC): it bounds Q off the data, so the Q term
         can pull at the paper's strength without the actor climbing the critic's extrapolation. Passed to the policy
         (a ``critic_layer_norm`` in ``policy_kwargs`` takes precedence). Default ``True``; ``False``: the paper
@@ -206,7 +208,8 @@ class POLA(POLAObjectives, POLAData):
     :param bc_top_fraction: the actor's batches (its ``L_d`` and its Q term's states) come from this fraction of the
         episodes, the best by return (filtered BC, the Decision Transformer paper's %BC), the critics' from every
         transition. For dense rewards: a maze's collector switches goals, so its episodes' returns do not rank how a
-        policy holds one. ``None``: every episode (the paper; default)
+        policy holds one. ``"auto"`` (default): ``0.1`` where the data have no ``desired_goal``, else ``None``.
+        ``None``: every episode (the paper)
     :param max_grad_norm: gradient-norm clipping of actor and critic (``None`` disables it)
     :param ema_decay: decay of the EMA actor used for targets and ``predict``
     :param ema_update_freq: gradient steps between EMA updates
@@ -271,7 +274,7 @@ class POLA(POLAObjectives, POLAData):
         lookahead_trust_rule: str = "value",
         lcb_coef: float | None = None,
         critic_bc_coef: float = 0.0,
-        q_term_confidence: float | None = None,
+        q_term_confidence: float | str | None = "auto",
         critic_layer_norm: bool = True,
         eta_gate: str | None = "critic_maturity",
         eta_gate_fraction: float = 0.1,
@@ -289,7 +292,7 @@ class POLA(POLAObjectives, POLAData):
         bc_learning_rate: float | Schedule | None = None,
         bc_weight_temp: float | None = None,
         bc_max_weight: float = 20.0,
-        bc_top_fraction: float | None = None,
+        bc_top_fraction: float | str | None = "auto",
         max_grad_norm: float | None = 1.0,
         ema_decay: float = 0.995,
         ema_update_freq: int = 5,

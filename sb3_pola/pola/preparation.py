@@ -19,6 +19,7 @@ from sb3_pola.common.dict_obs import key_slice
 from sb3_pola.common.dynamics_cache import cache_key, data_fingerprint, fit_or_load
 from sb3_pola.common.dynamics_trainer import DynamicsTrainer, auto_max_steps
 from sb3_pola.common.offline_algorithm import OfflineAlgorithm
+from sb3_pola.pola.arguments import DENSE_REWARD_OPTIONS
 from sb3_pola.pola.losses import value_lower_bound
 from sb3_pola.pola.policies import POLAPolicy
 
@@ -53,7 +54,9 @@ class POLAData(OfflineAlgorithm):
     lookahead_fixed_goal: bool
     goal_switches: str | None
     hindsight_goals: bool
-    bc_top_fraction: float | None
+    bc_top_fraction: float | str | None
+    q_term_confidence: float | str | None
+    n_critics: int
     dynamics_fit_kwargs: dict[str, Any]
     dynamics_cache: bool
 
@@ -100,10 +103,25 @@ class POLAData(OfflineAlgorithm):
             data = data.with_hindsight_goals(reward_fn, seed=0 if self.seed is None else self.seed)
         return data
 
+    def _dense_option(self, name: str) -> float | None:
+        """An option for dense rewards (``DENSE_REWARD_OPTIONS``) as it applies: its value, or under ``"auto"`` its
+        dense-reward value where the data have no ``desired_goal`` (a maze's sparse reward: off; fortieth pass) and,
+        for ``q_term_confidence``, the critic has members to agree."""
+        value = getattr(self, name)
+        if value != "auto":
+            return value
+        space = self.dict_observation_space
+        if space is not None and "desired_goal" in space.spaces:
+            return None
+        if name == "q_term_confidence" and self.n_critics < 2:
+            return None
+        return DENSE_REWARD_OPTIONS[name]
+
     def _note_imitation_rows(self, data: OfflineDataset) -> None:
         """Note the rows of the data's best episodes, the actor's (``bc_top_fraction``)."""
-        if self.bc_top_fraction is not None:
-            self._imitation_rows = th.as_tensor(data.best_episode_rows(self.bc_top_fraction))
+        fraction = self._dense_option("bc_top_fraction")
+        if fraction is not None:
+            self._imitation_rows = th.as_tensor(data.best_episode_rows(fraction))
 
     def _actor_indices(self, buffer: OfflineReplayBuffer, batch_size: int) -> th.Tensor | None:
         """``[B]`` rows of the actor's batch where they are not the critics' (``bc_top_fraction``: the best episodes';
