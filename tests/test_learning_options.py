@@ -525,6 +525,9 @@ def test_dense_reward_options_are_on_by_default_without_a_goal(pendulum_path):
     assert set(model._imitation_rows.tolist()) == set(model.offline_data.best_episode_rows(0.1).tolist())
     model.learn(4)
     assert 0.0 <= model.logger.name_to_value["train/q_term_share"] <= 1.0
+    given = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(q_term_confidence=1.0, bc_top_fraction=0.1))
+    given.learn(4)  # "auto" trains as the values it stands for, draw for draw
+    assert all(th.equal(a, b) for a, b in zip(model.policy.parameters(), given.policy.parameters(), strict=True))
     single = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(n_critics=1, top_k=1, critic_diversity=0.0))
     assert single._dense_option("q_term_confidence") is None  # no members to agree
     paper = POLA("MlpPolicy", dataset=pendulum_path, **light_kwargs(q_term_confidence=None, bc_top_fraction=None))
