@@ -1122,3 +1122,15 @@ screen --dataset pointmaze/umaze-v0 --seed 0 --rules mode --name BCcos --kwargs 
 for s in 0 1; do
   screen --dataset pointmaze/medium-v0 --seed "$s" --rules mode --name BCcos --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0, \"lr_cos\": 0.001}"
 done
+
+# --- forty-first pass (stop 68): the two options as the package runs them (TQ, given explicitly: the new defaults'
+# "auto" values on these files) at seeds 0-2 on every locomotion file and hopper/medium's seed 7, and T = 0 with
+# them (T0TQ; the look-ahead row). Screen rows: collection amd-auto-defaults.
+TQ="$RNWE, \"q_term_confidence\": 1.0, \"bc_top_fraction\": 0.1"
+for d in hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfcheetah/medium-replay-v0; do
+  for s in 0 1 2; do
+    screen --dataset "$d" --seed "$s" --rules mode --name TQ --kwargs "{$TQ}"
+    screen --dataset "$d" --seed "$s" --rules mode --name T0TQ --kwargs "{$TQ, \"rollout_length\": 0}"
+  done
+done
+screen --dataset hopper/medium-v0 --seed 7 --rules mode --name TQ --kwargs "{$TQ}"
