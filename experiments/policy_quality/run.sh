@@ -1134,3 +1134,8 @@ for d in hopper/medium-v0 hopper/medium-replay-v0 halfcheetah/medium-v0 halfchee
   done
 done
 screen --dataset hopper/medium-v0 --seed 7 --rules mode --name TQ --kwargs "{$TQ}"
+# the look-ahead counted only where the critic values a predicted state no higher than the current one (TQTM)
+for s in 0 1 2; do
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name TQTM --kwargs "{$TQ, \"lookahead_trust_margin\": 0.0}"
+done
+screen --dataset hopper/medium-v0 --seed 0 --rules mode --name TQTM --kwargs "{$TQ, \"lookahead_trust_margin\": 0.0}"
