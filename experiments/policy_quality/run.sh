@@ -1139,3 +1139,19 @@ for s in 0 1 2; do
   screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name TQTM --kwargs "{$TQ, \"lookahead_trust_margin\": 0.0}"
 done
 screen --dataset hopper/medium-v0 --seed 0 --rules mode --name TQTM --kwargs "{$TQ, \"lookahead_trust_margin\": 0.0}"
+
+# --- forty-second pass (stop 69): where hopper/medium-replay's look-ahead cost comes from, with the new defaults
+# ("auto": RNWE alone is them). TQW: the look-ahead at T = 0's total Q weight ("weights" spreads eta over the T + 1
+# terms); T0E: T = 0 at T = 3's total weight (eta 3.94 x 1.1838); T3W0: T = 3 with the predicted states' terms at
+# weight 0 (T = 0's loss on T = 3's random stream). Then seeds 3-5 of the new defaults and of T = 0 on
+# hopper/medium-replay. Screen rows: collection amd-lookahead-cost.
+for s in 0 1 2; do
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name TQW --kwargs "{$RNWE, \"lookahead_normalization\": \"weights\"}"
+  screen --dataset hopper/medium-v0 --seed "$s" --rules mode --name TQW --kwargs "{$RNWE, \"lookahead_normalization\": \"weights\"}"
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name T0E --kwargs "{$RNWE, \"rollout_length\": 0, \"eta\": 4.664}"
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name T3W0 --kwargs "{$RNWE, \"lookahead_weight\": 0.0}"
+done
+for s in 3 4 5; do
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name TQ --kwargs "{$RNWE}"
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name T0TQ --kwargs "{$RNWE, \"rollout_length\": 0}"
+done
