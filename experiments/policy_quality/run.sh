@@ -1155,3 +1155,8 @@ for s in 3 4 5; do
   screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name TQ --kwargs "{$RNWE}"
   screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name T0TQ --kwargs "{$RNWE, \"rollout_length\": 0}"
 done
+# the new defaults' BC (eta = 0, the best tenth by bc_top_fraction="auto"; T = 0, nothing to look ahead for) on
+# hopper/medium-replay's six seeds (BCD): the "above BC" test at six seeds
+for s in 0 1 2 3 4 5; do
+  screen --dataset hopper/medium-replay-v0 --seed "$s" --rules mode --name BCD --kwargs "{$RNWE, \"eta\": 0.0, \"rollout_length\": 0}"
+done
